@@ -1,0 +1,49 @@
+"""Boundary validation helpers: convert, check shape and finiteness, raise ValueError
+naming the expected and the actual."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def check_points(points, name: str = "points", dims: tuple[int, ...] = (2, 3), min_count: int = 1) -> np.ndarray:
+    """Return ``points`` as a C-contiguous (n, d) float64 array, d in ``dims``.
+
+    Raises ValueError naming the expected and the actual shape, a non-finite entry, or too few rows.
+    """
+    try:
+        arr = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be an (n, d) array of numbers, d in {dims}; could not convert: {exc}") from None
+    if arr.ndim != 2 or arr.shape[1] not in dims:
+        raise ValueError(f"{name} must have shape (n, d) with d in {dims}; got shape {arr.shape}")
+    if arr.shape[0] < min_count:
+        raise ValueError(f"{name} needs at least {min_count} points in {arr.shape[1]}D; got {arr.shape[0]}")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        row = int(np.argwhere(bad)[0][0])
+        raise ValueError(f"{name} must be finite; row {row} is {arr[row].tolist()} (remove NaN/inf points first)")
+    return np.ascontiguousarray(arr)
+
+
+def check_vector(v, name: str, size: int) -> np.ndarray:
+    """Return ``v`` as a finite float64 vector of length ``size``."""
+    try:
+        arr = np.asarray(v, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be {size} numbers; could not convert: {exc}") from None
+    if arr.shape != (size,):
+        raise ValueError(f"{name} must have {size} components; got {arr.size}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be finite; got {arr.tolist()}")
+    return arr
+
+
+def check_positive(x, name: str) -> float:
+    """Return ``x`` as a finite float > 0."""
+    try:
+        val = float(x)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number; got {x!r}") from None
+    if not np.isfinite(val) or val <= 0:
+        raise ValueError(f"{name} must be a positive finite number; got {val}")
+    return val
