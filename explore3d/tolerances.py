@@ -12,3 +12,12 @@ DEGENERACY_RTOL = 1e-9
 
 #: Forward kinematics agrees with PyBullet's link states to this many metres (issue 3).
 FK_ATOL_M = 1e-6
+
+#: Distance in metres within which a simulated link point counts as on an object's surface
+#: (explore3d.simulated).  Link end points are computed from boundary points of ~0.1 m objects
+#: in float64 (error ~1e-17 m, a few ulps); 1 nm is a wide margin yet far below any feature.
+SURFACE_ATOL_M = 1e-9
+
+#: Relative volume agreement of a mesh written to binary STL and read back: STL stores
+#: float32 coordinates (relative rounding 6e-8 per coordinate, ~3 of them per volume term).
+STL_FLOAT32_RTOL = 1e-6
