@@ -1,0 +1,230 @@
+"""The arm: a planar serial chain of identical box links with parallel revolute joints.
+
+Frames (pytransform3d-style names: ``T_a_b`` maps b-coordinates to a-coordinates):
+
+* ``base``: the arm's fixed base frame.  Joint 0 sits at its origin.  All joint axes are +z of
+  the base frame, so the arm moves in the base x-y plane ("the arm's plane").
+* ``link i`` (i = 0..n-1): origin at joint i, x along the link, z the joint axis.  With all joint
+  angles zero the arm lies straight along base +x.  Link i spans x in [0, L], y in [-W/2, W/2],
+  z in [-H/2, H/2] (L, W, H = ``link_length``, ``link_width``, ``link_height``).
+* A *positive* joint angle curls the distal chain towards +y: the *inner face* of every link is
+  its +y face (y = +W/2), the *outer face* its -y face.
+
+The URDF written by :func:`arm_urdf` uses exactly this geometry for collision boxes, so the
+surface points of :mod:`explore3d.kinematics` lie on the simulated links' faces.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ._validate import check_positive
+
+#: Standard gravity, m/s^2 (used to size motor torques).
+GRAVITY_M_S2 = 9.81
+
+_SPEC_TAG = "explore3d-arm-spec:"
+
+
+@dataclass(frozen=True)
+class ArmSpec:
+    """A chain of ``n_links`` identical box links (SI units).
+
+    Attributes:
+        name: identifier written into the URDF.
+        n_links: number of links (= number of revolute joints), >= 1.
+        link_length: joint-to-joint distance L, metres.
+        link_width: in-plane thickness W (the curl direction), metres.
+        link_height: out-of-plane thickness H (along the joint axes), metres.
+        link_mass: mass of one link, kg.
+        joint_lower: lower joint limit, rad (negative = bends outward).
+        joint_upper: upper joint limit, rad (positive = curls inward).
+        max_torque: motor torque limit of the most distal joint, N m.  Proximal joints get this
+            plus what they need to hold the distal chain against gravity in any orientation
+            (see :meth:`joint_torques`).
+        base_size: edge of the cubic base block, metres (the base block sits behind joint 0).
+    """
+
+    name: str = "default"
+    n_links: int = 24
+    link_length: float = 0.02
+    link_width: float = 0.008
+    link_height: float = 0.01
+    link_mass: float = 0.01
+    joint_lower: float = -0.5
+    joint_upper: float = 2.0
+    max_torque: float = 1.0
+    base_size: float = 0.02
+
+    def __post_init__(self):
+        if not isinstance(self.n_links, int) or isinstance(self.n_links, bool) or self.n_links < 1:
+            raise ValueError(f"n_links must be an integer >= 1; got {self.n_links!r}")
+        for field in ("link_length", "link_width", "link_height", "link_mass", "max_torque", "base_size"):
+            check_positive(getattr(self, field), field)
+        if not (self.joint_lower < 0.0 < self.joint_upper):
+            raise ValueError(
+                f"joint limits must satisfy joint_lower < 0 < joint_upper (rad); got [{self.joint_lower}, {self.joint_upper}]"
+            )
+        if not re.fullmatch(r"[A-Za-z0-9_\-]+", self.name):
+            raise ValueError(f"arm name must be letters, digits, '_' or '-'; got {self.name!r}")
+
+    @property
+    def reach(self) -> float:
+        """Length of the straight arm from joint 0 to the tip, metres."""
+        return self.n_links * self.link_length
+
+    def gravity_torques(self) -> tuple[float, ...]:
+        """Largest static gravity torque on each joint, N m: the straight distal chain held
+        horizontally in a vertical plane (an upper bound over all configurations)."""
+        out = []
+        for i in range(self.n_links):
+            n_distal = self.n_links - i
+            lever = n_distal * self.link_length / 2.0  # centre of mass of the straight distal chain
+            out.append(n_distal * self.link_mass * GRAVITY_M_S2 * lever)
+        return tuple(out)
+
+    def inertia_bounds(self) -> tuple[float, ...]:
+        """Moment of inertia, kg m^2, of the straight distal chain about each joint axis (an upper
+        bound over configurations: a curled chain is closer to the axis)."""
+        L, m = self.link_length, self.link_mass
+        own = m * (L * L + self.link_width ** 2) / 12.0
+        out = []
+        for i in range(self.n_links):
+            centres = (np.arange(self.n_links - i) + 0.5) * L
+            out.append(float(np.sum(m * centres ** 2 + own)))
+        return tuple(out)
+
+    def joint_torques(self) -> tuple[float, ...]:
+        """Motor torque limit of each joint, N m: ``max_torque`` plus twice the gravity bound
+        (so every joint can hold the arm in any orientation and still push)."""
+        return tuple(self.max_torque + 2.0 * g for g in self.gravity_torques())
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+#: The paper's hardware: four modules of 110 mm (section IV), ~1 kg each (4 kg in all).
+PAPER_ARM = ArmSpec(
+    name="paper",
+    n_links=4,
+    link_length=0.11,
+    link_width=0.04,
+    link_height=0.04,
+    link_mass=1.0,
+    joint_lower=-0.5,
+    joint_upper=2.0,
+    max_torque=5.0,
+    base_size=0.05,
+)
+
+#: Our default: many small links (the paper's conclusion).  Sized so that the straight arm
+#: (0.48 m) can wrap the largest cross-section of the built-in objects (the 63 mm cylinder's
+#: axial section has a perimeter of 0.41 m).
+DEFAULT_ARM = ArmSpec(name="default")
+
+BUILTIN_ARMS: dict[str, ArmSpec] = {"paper": PAPER_ARM, "default": DEFAULT_ARM}
+
+
+def _box_inertia(m: float, x: float, y: float, z: float) -> tuple[float, float, float]:
+    return (m * (y * y + z * z) / 12.0, m * (x * x + z * z) / 12.0, m * (x * x + y * y) / 12.0)
+
+
+def arm_urdf(spec: ArmSpec) -> str:
+    """URDF text of the chain described by ``spec`` (see the module docstring for the frames).
+
+    The spec is embedded as a JSON comment so :func:`load_arm` can read it back.
+    """
+    L, W, H, m = spec.link_length, spec.link_width, spec.link_height, spec.link_mass
+    b = spec.base_size
+    ixx, iyy, izz = _box_inertia(m, L, W, H)
+    torques = spec.joint_torques()
+    lines = [
+        '<?xml version="1.0"?>',
+        f"<!-- {_SPEC_TAG} {json.dumps(spec.to_dict(), sort_keys=True)} -->",
+        f"<!-- Generated by explore3d.arm.arm_urdf; regenerate with `python scripts/make_arms.py`. -->",
+        f'<robot name="{spec.name}">',
+        '  <material name="base"><color rgba="0.3 0.3 0.3 1"/></material>',
+        '  <material name="link_a"><color rgba="0.95 0.55 0.1 1"/></material>',
+        '  <material name="link_b"><color rgba="0.2 0.45 0.85 1"/></material>',
+        '  <link name="base">',
+        '    <inertial><origin xyz="0 0 0"/><mass value="1.0"/>'
+        '<inertia ixx="1e-3" ixy="0" ixz="0" iyy="1e-3" iyz="0" izz="1e-3"/></inertial>',
+        f'    <visual><origin xyz="{-b / 2 - 1e-3:.6g} 0 0"/><geometry><box size="{b:.6g} {b:.6g} {b:.6g}"/></geometry>'
+        '<material name="base"/></visual>',
+        f'    <collision><origin xyz="{-b / 2 - 1e-3:.6g} 0 0"/><geometry><box size="{b:.6g} {b:.6g} {b:.6g}"/></geometry></collision>',
+        "  </link>",
+    ]
+    for i in range(spec.n_links):
+        parent = "base" if i == 0 else f"link{i - 1}"
+        x0 = 0.0 if i == 0 else L
+        mat = "link_a" if i % 2 == 0 else "link_b"
+        lines += [
+            f'  <joint name="joint{i}" type="revolute">',
+            f'    <parent link="{parent}"/><child link="link{i}"/>',
+            f'    <origin xyz="{x0:.9g} 0 0" rpy="0 0 0"/><axis xyz="0 0 1"/>',
+            f'    <limit lower="{spec.joint_lower:.9g}" upper="{spec.joint_upper:.9g}" effort="{torques[i]:.6g}" velocity="20"/>',
+            '    <dynamics damping="0" friction="0"/>',
+            "  </joint>",
+            f'  <link name="link{i}">',
+            f'    <inertial><origin xyz="{L / 2:.9g} 0 0"/><mass value="{m:.9g}"/>'
+            f'<inertia ixx="{ixx:.6g}" ixy="0" ixz="0" iyy="{iyy:.6g}" iyz="0" izz="{izz:.6g}"/></inertial>',
+            f'    <visual><origin xyz="{L / 2:.9g} 0 0"/><geometry><box size="{L:.9g} {W:.9g} {H:.9g}"/></geometry>'
+            f'<material name="{mat}"/></visual>',
+            f'    <collision><origin xyz="{L / 2:.9g} 0 0"/><geometry><box size="{L:.9g} {W:.9g} {H:.9g}"/></geometry></collision>',
+            "  </link>",
+        ]
+    lines.append("</robot>")
+    return "\n".join(lines) + "\n"
+
+
+def write_arm_urdf(spec: ArmSpec, path) -> Path:
+    """Write :func:`arm_urdf` of ``spec`` to ``path`` atomically; returns the path."""
+    from .io import atomic_write_text
+
+    path = Path(path)
+    atomic_write_text(path, arm_urdf(spec))
+    return path
+
+
+def spec_from_urdf_text(text: str, source: str = "URDF") -> ArmSpec:
+    """Read back the :class:`ArmSpec` embedded by :func:`arm_urdf`."""
+    m = re.search(re.escape(_SPEC_TAG) + r"\s*(\{.*?\})\s*-->", text)
+    if m is None:
+        raise ValueError(
+            f"{source} is not an explore3d chain (no '{_SPEC_TAG}' comment); write one with `explore3d arm` "
+            "or explore3d.arm.write_arm_urdf"
+        )
+    try:
+        return ArmSpec(**json.loads(m.group(1)))
+    except (TypeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{source}: the embedded arm spec is invalid ({exc}); regenerate the URDF") from None
+
+
+def load_arm(spec) -> ArmSpec:
+    """An :class:`ArmSpec` from a built-in name (``"paper"``, ``"default"``), a URDF path written by
+    :func:`write_arm_urdf`, or an ArmSpec (returned as is)."""
+    if isinstance(spec, ArmSpec):
+        return spec
+    key = str(spec)
+    if key in BUILTIN_ARMS:
+        return BUILTIN_ARMS[key]
+    path = Path(key)
+    if not path.suffix.lower() == ".urdf":
+        raise ValueError(f"unknown arm {key!r}: use one of {sorted(BUILTIN_ARMS)} or a path to a .urdf file")
+    if not path.is_file():
+        raise ValueError(f"arm URDF {key!r} does not exist; check the path")
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"cannot read arm URDF {key!r}: {exc}") from None
+    return spec_from_urdf_text(text, source=key)
+
+
+def link_angle_for_perimeter(spec: ArmSpec, perimeter: float) -> float:
+    """Mean joint angle, rad, of a chain wrapped once around a convex outline of ``perimeter`` metres."""
+    return 2.0 * math.pi * spec.link_length / perimeter
