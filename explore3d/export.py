@@ -1,0 +1,202 @@
+"""Writing results: estimate meshes, a URDF that loads the estimate in PyBullet, and point clouds.
+
+Every file goes through :mod:`explore3d.io` (atomic: a killed run leaves no half-written file
+under its final name).  All coordinates are metres in the frame they are given in (for
+explore3d results: the world frame, which is the object's own frame).
+"""
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import numpy as np
+
+from .io import atomic_path, atomic_write_bytes, atomic_write_text
+
+#: Mesh formats :func:`write_mesh` writes (OFF is the format GraspIt! reads).
+MESH_FORMATS = ("obj", "stl", "ply", "off", "glb")
+
+#: Mesh formats PyBullet's URDF loader reads for collision shapes.
+URDF_MESH_FORMATS = ("obj", "stl")
+
+#: PLY vertex properties written by :func:`write_points_ply` besides x, y, z.
+POINT_PROPERTIES = ("wrap", "attempt", "link")
+
+
+def check_format(fmt) -> str:
+    """Lower-cased ``fmt`` if it is one of :data:`MESH_FORMATS`, else ValueError naming them."""
+    f = str(fmt).lower().lstrip(".")
+    if f not in MESH_FORMATS:
+        raise ValueError(f"unknown mesh format {fmt!r}; use one of {', '.join(MESH_FORMATS)}")
+    return f
+
+
+def write_mesh(mesh, path, fmt: str | None = None) -> Path:
+    """Write ``mesh`` (trimesh.Trimesh, vertices (n, 3) in metres) to ``path`` atomically.
+
+    Args:
+        fmt: one of :data:`MESH_FORMATS`; default: the suffix of ``path``.
+
+    Returns the path.  Raises ValueError for an unknown format, OSError if it cannot be written.
+    """
+    path = Path(path)
+    fmt = check_format(fmt if fmt is not None else path.suffix)
+    data = mesh.export(file_type=fmt)
+    if isinstance(data, str):
+        data = data.encode("utf-8")
+    return atomic_write_bytes(path, data)
+
+
+def estimate_urdf(mesh_filename: str, mass: float = 0.1, name: str = "estimate") -> str:
+    """URDF text of one rigid link whose visual and collision geometry is ``mesh_filename``
+    (a path relative to the URDF's folder, metres, scale 1).  The link's frame is the mesh's
+    frame; the inertia is a small sphere-like placeholder at the origin (mass in kg)."""
+    mass = float(mass)
+    if not (np.isfinite(mass) and mass > 0):
+        raise ValueError(f"mass must be a positive number of kg; got {mass!r}")
+    fn = html.escape(str(mesh_filename), quote=True)
+    i = mass * 1e-3  # kg m^2: a ~5 cm body; only used if the object is made dynamic
+    return f"""<?xml version="1.0"?>
+<robot name="{html.escape(name, quote=True)}">
+  <link name="object">
+    <inertial>
+      <origin xyz="0 0 0" rpy="0 0 0"/>
+      <mass value="{mass:g}"/>
+      <inertia ixx="{i:g}" ixy="0" ixz="0" iyy="{i:g}" iyz="0" izz="{i:g}"/>
+    </inertial>
+    <visual>
+      <origin xyz="0 0 0" rpy="0 0 0"/>
+      <geometry><mesh filename="{fn}" scale="1 1 1"/></geometry>
+      <material name="estimate"><color rgba="0.2 0.5 0.9 1"/></material>
+    </visual>
+    <collision>
+      <origin xyz="0 0 0" rpy="0 0 0"/>
+      <geometry><mesh filename="{fn}" scale="1 1 1"/></geometry>
+    </collision>
+  </link>
+</robot>
+"""
+
+
+def write_estimate_urdf(mesh_filename, path, mass: float = 0.1, mesh=None) -> Path:
+    """Write a URDF at ``path`` that loads the exported estimate as one rigid body in PyBullet.
+
+    Args:
+        mesh_filename: the exported mesh, a path relative to ``path``'s folder (or absolute).
+        path: the URDF to write.
+        mass: kg.
+        mesh: trimesh.Trimesh; needed only when ``mesh_filename`` is not OBJ/STL (PyBullet reads
+            only those for collision): an OBJ beside it (same stem, ``.obj``) is then written
+            from ``mesh`` and referenced instead.
+
+    Returns the URDF path.
+    """
+    path = Path(path)
+    fn = Path(mesh_filename)
+    if fn.suffix.lower().lstrip(".") not in URDF_MESH_FORMATS:
+        if mesh is None:
+            raise ValueError(f"PyBullet cannot load {fn.suffix or 'suffix-less'} meshes in a URDF; "
+                             "pass mesh= so an OBJ copy is written, or export OBJ/STL")
+        fn = fn.with_suffix(".obj")
+        target = fn if fn.is_absolute() else path.parent / fn
+        write_mesh(mesh, target, "obj")
+    return atomic_write_text(path, estimate_urdf(fn.as_posix(), mass=mass))
+
+
+def write_points_ply(points, path, wrap=None, attempt=None, link=None, binary: bool = True) -> Path:
+    """Write link surface points as a PLY point cloud (atomic).
+
+    Args:
+        points: (m, 2) or (m, 3) float, metres; 2D points get z = 0.
+        wrap, attempt, link: (m,) int each (default zeros): which wrap, attempt and link gave each point.
+        binary: binary little-endian (default) or ASCII PLY.
+
+    The vertex element has float x, y, z and int wrap, attempt, link.
+    """
+    P = np.asarray(points, dtype=float)
+    if P.ndim != 2 or P.shape[1] not in (2, 3):
+        raise ValueError(f"points must be (m, 2) or (m, 3); got shape {P.shape}")
+    if not np.all(np.isfinite(P)):
+        raise ValueError("points contain NaN or inf")
+    m = len(P)
+    if P.shape[1] == 2:
+        P = np.column_stack([P, np.zeros(m)])
+    cols = {}
+    for name, v in zip(POINT_PROPERTIES, (wrap, attempt, link)):
+        a = np.zeros(m, dtype=np.int64) if v is None else np.asarray(v)
+        if a.shape != (m,):
+            raise ValueError(f"{name} must have shape ({m},) like the points; got {a.shape}")
+        cols[name] = a.astype(np.int32)
+    dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4")] + [(n, "<i4") for n in POINT_PROPERTIES])
+    rec = np.empty(m, dtype=dtype)
+    rec["x"], rec["y"], rec["z"] = P[:, 0], P[:, 1], P[:, 2]
+    for n in POINT_PROPERTIES:
+        rec[n] = cols[n]
+    fmt = "binary_little_endian" if binary else "ascii"
+    header = (f"ply\nformat {fmt} 1.0\ncomment explore3d link surface points, metres, world frame\n"
+              f"element vertex {m}\nproperty float x\nproperty float y\nproperty float z\n"
+              + "".join(f"property int {n}\n" for n in POINT_PROPERTIES) + "end_header\n")
+    if binary:
+        body = rec.tobytes()
+    else:
+        lines = [f"{r['x']:.9g} {r['y']:.9g} {r['z']:.9g} {r['wrap']} {r['attempt']} {r['link']}" for r in rec]
+        body = ("\n".join(lines) + ("\n" if lines else "")).encode("ascii")
+    return atomic_write_bytes(path, header.encode("ascii") + body)
+
+
+def read_points_ply(path, with_properties: bool = False):
+    """Read a point file (PLY, or any point/mesh file trimesh loads, or a text XYZ file).
+
+    Returns (n, 3) float64 metres; with ``with_properties`` also a dict of the (n,) int vertex
+    properties found among :data:`POINT_PROPERTIES` (PLY only; else empty).
+
+    Raises ValueError (missing, unreadable, or no points) naming the problem.
+    """
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"point file not found: {path}; check the path")
+    if path.stat().st_size == 0:
+        raise ValueError(f"point file {path} is empty; pass a PLY/XYZ file with points")
+    props = {}
+    if path.suffix.lower() in (".xyz", ".txt", ".csv"):
+        try:
+            pts = np.loadtxt(path, delimiter="," if path.suffix.lower() == ".csv" else None, ndmin=2)[:, :3]
+        except ValueError as exc:
+            raise ValueError(f"cannot read {path} as x y z rows ({exc}); pass a PLY or XYZ file") from None
+    else:
+        try:
+            loaded = trimesh.load(str(path), process=False)
+        except Exception as exc:  # trimesh raises many types for unreadable files
+            raise ValueError(f"cannot read {path} as a point file ({type(exc).__name__}: {exc}); "
+                             "pass a PLY or XYZ file") from None
+        if isinstance(loaded, trimesh.Scene):
+            geoms = list(loaded.dump()) if len(loaded.geometry) else []
+            if not geoms:
+                raise ValueError(f"{path} contains no points; pass a PLY or XYZ file with points")
+            loaded = geoms[0] if len(geoms) == 1 else trimesh.util.concatenate(geoms)
+        pts = np.asarray(getattr(loaded, "vertices", np.empty((0, 3))), dtype=float)
+        attrs = getattr(loaded, "metadata", {}).get("_ply_raw", {}).get("vertex", {}).get("data")
+        # binary PLY: a structured array; ASCII PLY: a dict of (n, 1) arrays
+        names = attrs.keys() if isinstance(attrs, dict) else (getattr(getattr(attrs, "dtype", None), "names", None) or ())
+        for n in POINT_PROPERTIES:
+            if n in names:
+                props[n] = np.asarray(attrs[n], dtype=np.int64).reshape(-1)
+        if not props and hasattr(loaded, "vertex_attributes"):
+            for n in POINT_PROPERTIES:
+                if n in loaded.vertex_attributes:
+                    props[n] = np.asarray(loaded.vertex_attributes[n], dtype=np.int64).reshape(-1)
+    if pts.ndim != 2 or pts.shape[0] == 0 or pts.shape[1] != 3:
+        raise ValueError(f"{path} contains no 3D points; pass a PLY or XYZ file with points")
+    if not np.all(np.isfinite(pts)):
+        raise ValueError(f"{path} contains NaN or inf coordinates")
+    return (pts, props) if with_properties else pts
+
+
+def points_2d_if_planar(points, tol: float = 1e-12) -> np.ndarray:
+    """(n, 2) if every z of the (n, 3) ``points`` is 0 (a planar exploration), else the points."""
+    P = np.asarray(points, dtype=float)
+    if P.shape[1] == 3 and np.all(np.abs(P[:, 2]) <= tol):
+        return P[:, :2]
+    return P
