@@ -1,0 +1,237 @@
+"""Explore an object with the simulated arm: wraps from known base poses, link surface points out.
+
+The robot is given the rough centre and a bounding radius of the object (the paper: the object
+is within reach), never its mesh; the mesh is handed only to the simulation (the world).
+Wraps are independent (each restores the same initial physics state), so they are spread over
+processes with identical results for any number of jobs.
+"""
+from __future__ import annotations
+
+import functools
+import logging
+import math
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .arm import ArmSpec, load_arm
+from .directions import WrapPose, planar_wrap_poses, spatial_wrap_poses
+from .encircle import Attempt, ContactBand, ControlConfig, calibrate_band, run_wrap
+from .kinematics import link_surface_points
+from .sim import ArmSimulation, SimConfig
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ExploreConfig:
+    """How to explore (SI units).
+
+    Attributes:
+        mode: "planar" (the arm in the horizontal plane through the object's centre, 2D result)
+            or "3d" (wrap planes spread over the sphere, 3D result).
+        directions: planar: number of approach directions (90 degrees apart; with
+            ``mirrored`` and 2, the paper's mirrored pair).  3d: number of plane normals.
+        mirrored: planar only: the second direction is the mirror image of the first.
+        offsets: 3d: planes per normal, at offsets along it.
+        angles: 3d: approach angles per plane.
+        attempts: attempts per wrap (the base joint stops ``base_step`` short each time).
+        base_step: rad.
+        clearance: metres between the straight arm and the rough bounding circle at the start.
+        n_along, n_height: surface points per link face along its length and height (3d; planar
+            uses the mid-plane only).
+        faces: which link faces give points: ("inner",) or ("inner", "outer").
+        face_offset: calibrated contact thickness, metres (pushes faces towards the object).
+        control: the reference controller.
+        sim: physics settings.
+        jobs: worker processes (None: all cores).  Results do not depend on it.
+        record: keep every step's joint angles (for free-space carving).
+    """
+
+    mode: str = "3d"
+    directions: int = 24
+    mirrored: bool = False
+    offsets: int = 3
+    angles: int = 2
+    attempts: int = 2
+    base_step: float = 0.1
+    clearance: float = 0.01
+    n_along: int = 5
+    n_height: int = 3
+    faces: tuple = ("inner",)
+    face_offset: float = 0.0
+    control: ControlConfig = field(default_factory=ControlConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    jobs: int | None = 1
+    record: bool = False
+
+    def __post_init__(self):
+        if self.mode not in ("planar", "3d"):
+            raise ValueError(f"mode must be 'planar' or '3d'; got {self.mode!r}")
+        for name in ("directions", "offsets", "angles", "attempts", "n_along", "n_height"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
+                raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
+        if self.jobs is not None and (not isinstance(self.jobs, int) or self.jobs < 1):
+            raise ValueError(f"jobs must be an integer >= 1 or None (all cores); got {self.jobs!r}")
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["faces"] = list(self.faces)
+        return d
+
+
+@dataclass(frozen=True)
+class Exploration:
+    """What an exploration gathered.
+
+    Attributes:
+        spec: the arm.
+        config: the configuration.
+        poses: the wraps' base poses.
+        attempts: per wrap, its attempts.
+        points: (m, d) link surface points, world frame, metres (d = 2 planar, 3 in 3d).
+        point_wrap, point_attempt, point_link: (m,) int: where each point came from.
+        band: the calibrated contact band.
+        steps: physics steps taken (all wraps).
+        sim_time_s: simulated time, s.
+        wall_s: wall-clock time of the exploration, s.
+    """
+
+    spec: ArmSpec
+    config: ExploreConfig
+    poses: tuple
+    attempts: tuple
+    points: np.ndarray
+    point_wrap: np.ndarray
+    point_attempt: np.ndarray
+    point_link: np.ndarray
+    band: ContactBand
+    steps: int
+    sim_time_s: float
+    wall_s: float
+
+    @property
+    def n_wraps(self) -> int:
+        return len(self.poses)
+
+    @property
+    def n_contacts(self) -> int:
+        """Number of joint sweeps that ended in a detected contact."""
+        return int(sum(a.contact.sum() for w in self.attempts for a in w))
+
+
+@functools.lru_cache(maxsize=16)
+def _band(spec: ArmSpec, control: ControlConfig, sim: SimConfig, planar: bool) -> ContactBand:
+    if planar:  # gravity along the joint axes: the horizontal plane is the only orientation
+        return calibrate_band(spec, control, sim, base_transforms=[np.eye(4)])
+    return calibrate_band(spec, control, sim)
+
+
+def rough_bound(vertices) -> tuple[np.ndarray, float]:
+    """The rough centre (3,) and bounding radius, metres, the robot is told (bounding-box centre
+    and the largest vertex distance from it; a 5% margin for roughness)."""
+    v = np.asarray(vertices, dtype=float)
+    c = (v.min(0) + v.max(0)) / 2.0
+    return c, 1.05 * float(np.linalg.norm(v - c, axis=1).max())
+
+
+def wrap_poses(spec: ArmSpec, config: ExploreConfig, centre, radius: float) -> list[WrapPose]:
+    """The wraps' base poses for ``config`` around the rough centre (3,) and bounding radius (m)."""
+    if config.mode == "planar":
+        return planar_wrap_poses(centre, radius, spec.link_width, config.directions, config.mirrored,
+                                 clearance=config.clearance)
+    return spatial_wrap_poses(centre, radius, spec.link_width, config.directions, config.offsets, config.angles,
+                              clearance=config.clearance)
+
+
+# --- worker side -------------------------------------------------------------------------------
+_WORKER: dict = {}
+
+
+def _init_worker(spec, vertices, faces, sim_config):
+    _WORKER["sim"] = ArmSimulation(spec, vertices, faces, sim_config)
+
+
+def _run_one(args):
+    T, band, config = args
+    sim = _WORKER["sim"]
+    s0 = sim.steps
+    atts = run_wrap(sim, T, band, attempts=config.attempts, base_step=config.base_step, cfg=config.control,
+                    record=config.record)
+    return atts, sim.steps - s0
+
+
+def attempt_points(spec: ArmSpec, attempt: Attempt, config: ExploreConfig) -> np.ndarray:
+    """(n_links, k, d) link surface points of one attempt's final configuration, world frame."""
+    if config.mode == "planar":
+        P = link_surface_points(spec, attempt.q, attempt.T_world_base, config.n_along, 1, config.faces,
+                                config.face_offset)
+        return P[..., :2]
+    return link_surface_points(spec, attempt.q, attempt.T_world_base, config.n_along, config.n_height,
+                               config.faces, config.face_offset)
+
+
+def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre=None, radius=None,
+            progress=None) -> Exploration:
+    """Explore ``mesh`` (a closed trimesh, metres, world frame) with ``arm`` (name, URDF path or
+    ArmSpec) and return the gathered link surface points.
+
+    Args:
+        centre, radius: the rough location (3,) and bounding radius (m) the robot is told;
+            default: :func:`rough_bound` of the mesh (the mesh itself is never given to the robot).
+        progress: None, or a callable ``progress(done, total)`` called after each wrap.
+    """
+    t0 = time.perf_counter()
+    spec = load_arm(arm)
+    c0, r0 = rough_bound(mesh.vertices)
+    centre = c0 if centre is None else np.asarray(centre, float)
+    radius = r0 if radius is None else float(radius)
+    if config.mode == "planar":
+        # the arm's plane passes through the rough centre: put it at z = centre z
+        pass
+    poses = wrap_poses(spec, config, centre, radius)
+    band = _band(spec, config.control, config.sim, config.mode == "planar")
+    vertices = np.asarray(mesh.vertices, dtype=float)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    tasks = [(p.T_world_base, band, config) for p in poses]
+    jobs = config.jobs or os.cpu_count() or 1
+    results = []
+    if jobs == 1 or len(tasks) == 1:
+        _init_worker(spec, vertices, faces, config.sim)
+        try:
+            for i, t in enumerate(tasks):
+                results.append(_run_one(t))
+                if progress:
+                    progress(i + 1, len(tasks))
+        finally:
+            _WORKER.pop("sim").close()
+    else:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
+        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=ctx, initializer=_init_worker,
+                                 initargs=(spec, vertices, faces, config.sim)) as ex:
+            for i, r in enumerate(ex.map(_run_one, tasks)):
+                results.append(r)
+                if progress:
+                    progress(i + 1, len(tasks))
+    attempts = tuple(tuple(r[0]) for r in results)
+    steps = int(sum(r[1] for r in results))
+    pts, pw, pa, pl = [], [], [], []
+    for wi, atts in enumerate(attempts):
+        for ai, att in enumerate(atts):
+            P = attempt_points(spec, att, config)
+            k = P.shape[1]
+            pts.append(P.reshape(-1, P.shape[-1]))
+            pw.append(np.full(P.shape[0] * k, wi))
+            pa.append(np.full(P.shape[0] * k, ai))
+            pl.append(np.repeat(np.arange(P.shape[0]), k))
+    return Exploration(
+        spec=spec, config=config, poses=tuple(poses), attempts=attempts, points=np.concatenate(pts),
+        point_wrap=np.concatenate(pw), point_attempt=np.concatenate(pa), point_link=np.concatenate(pl),
+        band=band, steps=steps, sim_time_s=steps * config.sim.timestep, wall_s=time.perf_counter() - t0,
+    )
