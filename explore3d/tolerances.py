@@ -21,3 +21,13 @@ SURFACE_ATOL_M = 1e-9
 #: Relative volume agreement of a mesh written to binary STL and read back: STL stores
 #: float32 coordinates (relative rounding 6e-8 per coordinate, ~3 of them per volume term).
 STL_FLOAT32_RTOL = 1e-6
+
+#: Issue target for the 3D inverse hull of dense surface samples: volume error below 3 % of the
+#: true volume (at a suitable ``a``; explore3d.hull).  A requirement, not a measured value.
+INVERSE_HULL_VOLUME_RTOL = 0.03
+
+#: Relative agreement of float64 volumes/areas computed two ways (exact answer vs boolean
+#: intersection; a shape vs its rigidly moved copy).  float64 rounding is ~1e-16 per operation;
+#: sums over ~1e4 triangles and rotated coordinates stay below ~1e-12; 1e-9 is a wide margin
+#: (float32, as in trimesh's manifold wrapper, would give ~1e-7 and fail it).
+FLOAT64_GEOMETRY_RTOL = 1e-9
