@@ -1,0 +1,661 @@
+"""Command line: ``explore3d run|reconstruct|evaluate|table1|arm|objects``.
+
+The parser produces the same dataclasses the Python API takes (:class:`ExploreConfig`,
+:class:`ArmSpec`); ``main(argv)`` returns an exit code and never raises or prints a traceback:
+
+* 0: success;
+* 1: a failed run (missing/unreadable/empty/non-mesh/open input file, no contacts, unwritable
+  output); a one-line ``explore3d: error: ...`` on stderr;
+* 2: a usage error (unknown option or value, non-numeric, out of range, unknown object, arm or
+  format, bad TOML config); the same one-line form.
+
+Heavy modules (numpy, trimesh, pybullet, matplotlib) are imported inside the commands, so
+``explore3d --help`` is instant.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import sys
+from pathlib import Path
+
+PROG = "explore3d"
+MESH_FORMATS = ("obj", "stl", "ply", "off", "glb")  # = explore3d.export.MESH_FORMATS (not imported: heavy)
+METHODS = ("exponential", "spherical")
+MODES = ("3d", "planar")
+
+log = logging.getLogger("explore3d.cli")
+
+
+class UsageError(Exception):
+    """Bad command-line or config input: exit code 2."""
+
+
+class RunError(Exception):
+    """A run that could not be completed: exit code 1."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser that raises :class:`UsageError` instead of printing usage and exiting."""
+
+    def error(self, message):
+        raise UsageError(f"{message} (see '{self.prog} --help')")
+
+
+# --- value checkers (used for flags and TOML values alike) -----------------------------------------
+
+def _number(text, name: str) -> float:
+    if isinstance(text, bool):
+        raise UsageError(f"{name} must be a number; got {text!r}")
+    try:
+        v = float(text)
+    except (TypeError, ValueError):
+        raise UsageError(f"{name} must be a number; got {text!r}") from None
+    if not math.isfinite(v):
+        raise UsageError(f"{name} must be finite; got {text!r}")
+    return v
+
+
+def _positive(name):
+    def f(text):
+        v = _number(text, name)
+        if not v > 0:
+            raise UsageError(f"{name} must be > 0; got {text!r}")
+        return v
+    f.__name__ = name  # argparse names the type in its own messages
+    return f
+
+
+def _int_min(name, lo=1):
+    def f(text):
+        if isinstance(text, bool) or isinstance(text, float):
+            raise UsageError(f"{name} must be an integer >= {lo}; got {text!r}")
+        try:
+            v = int(text)
+        except (TypeError, ValueError):
+            raise UsageError(f"{name} must be an integer >= {lo}; got {text!r}") from None
+        if v < lo:
+            raise UsageError(f"{name} must be an integer >= {lo}; got {text!r}")
+        return v
+    f.__name__ = name
+    return f
+
+
+def _choice(name, choices):
+    def f(text):
+        v = str(text).lower()
+        if v not in choices:
+            raise UsageError(f"unknown {name} {text!r}; use one of {', '.join(choices)}")
+        return v
+    f.__name__ = name
+    return f
+
+
+def _int_any(name):
+    def f(text):
+        try:
+            if isinstance(text, (bool, float)):
+                raise ValueError
+            return int(text)
+        except (TypeError, ValueError):
+            raise UsageError(f"{name} must be an integer; got {text!r}") from None
+    f.__name__ = name
+    return f
+
+
+def _centre(text):
+    t = str(text).strip().lower()
+    if t in ("mean", "midrange"):
+        return t
+    parts = [p for p in t.replace(";", ",").split(",") if p.strip()]
+    if len(parts) not in (2, 3):
+        raise UsageError(f"--centre must be mean, midrange or x,y[,z] in metres; got {text!r}")
+    return tuple(_number(p, "--centre coordinate") for p in parts)
+
+
+#: Options of ``run`` that a TOML config may set, with their checkers (flag name = key with '-').
+RUN_OPTIONS = {
+    "object": str,
+    "out": str,
+    "arm": str,
+    "mode": _choice("mode", MODES),
+    "directions": _int_min("--directions"),
+    "attempts": _int_min("--attempts"),
+    "a": _positive("--a"),
+    "method": _choice("method", METHODS),
+    "seed": _int_any("--seed"),
+    "jobs": _int_min("--jobs"),
+    "format": _choice("format", MESH_FORMATS),
+    "scale": _positive("--scale"),
+    "size": _positive("--size"),
+    # further ExploreConfig fields (TOML or flags)
+    "offsets": _int_min("--offsets"),
+    "angles": _int_min("--angles"),
+    "mirrored": None,  # bool
+    "base_step": _positive("--base_step"),
+    "clearance": _positive("--clearance"),
+    "n_along": _int_min("--n_along"),
+    "n_height": _int_min("--n_height"),
+}
+RUN_DEFAULTS = {"object": "cube", "arm": "default", "mode": "3d", "a": 0.2, "method": "exponential", "seed": 0,
+                "format": "obj"}
+_EXPLORE_KEYS = ("mode", "directions", "attempts", "jobs", "offsets", "angles", "mirrored", "base_step",
+                 "clearance", "n_along", "n_height")
+
+
+def _check_bool(v, name):
+    if isinstance(v, bool):
+        return v
+    raise UsageError(f"{name} must be true or false; got {v!r}")
+
+
+def read_toml_config(path) -> dict:
+    """Options for ``run`` from a TOML file (keys as in :data:`RUN_OPTIONS`, '-' or '_'), checked."""
+    import tomllib
+
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise UsageError(f"config file not found: {path}; check the --config path") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UsageError(f"cannot read config {path}: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UsageError(f"config {path} is not valid TOML ({exc}); fix the syntax") from None
+    out = {}
+    for k, v in data.items():
+        key = k.replace("-", "_")
+        if key not in RUN_OPTIONS:
+            raise UsageError(f"unknown key {k!r} in config {path}; valid keys: {', '.join(sorted(RUN_OPTIONS))}")
+        check = RUN_OPTIONS[key]
+        if key == "mirrored":
+            out[key] = _check_bool(v, "mirrored")
+        elif check is str:
+            if not isinstance(v, str):
+                raise UsageError(f"{k} in config {path} must be a string; got {v!r}")
+            out[key] = v
+        else:
+            out[key] = check(v)
+    if "scale" in out and "size" in out:
+        raise UsageError(f"config {path} sets both scale and size; keep one")
+    return out
+
+
+# --- parser --------------------------------------------------------------------------------------
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog=PROG, description="Explore an object with a simulated blind arm and reconstruct its shape "
+                                       "by the inverse convex hull.")
+    p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    r = sub.add_parser("run", help="explore an object, reconstruct it, measure the error, write results",
+                       description="Explore OBJECT (built-in name, mesh file or pybullet_data:NAME), reconstruct "
+                                   "its shape and write report.json, the estimate mesh, estimate.urdf, points.ply "
+                                   "and pictures into --out.  Flags override --config.")
+    r.add_argument("object", nargs="?", default=None, help="built-in name, mesh path or pybullet_data:NAME (default: cube)")
+    r.add_argument("--out", help="output folder (required, here or in --config)")
+    r.add_argument("--arm", help="built-in arm (paper, default) or a URDF written by 'explore3d arm'")
+    r.add_argument("--mode", type=RUN_OPTIONS["mode"], help="3d (default) or planar")
+    r.add_argument("--directions", type=RUN_OPTIONS["directions"], help="approach directions / plane normals (default: ExploreConfig)")
+    r.add_argument("--attempts", type=RUN_OPTIONS["attempts"], help="attempts per wrap")
+    r.add_argument("--offsets", type=RUN_OPTIONS["offsets"], help="3d: planes per normal")
+    r.add_argument("--angles", type=RUN_OPTIONS["angles"], help="3d: approach angles per plane")
+    r.add_argument("--a", type=RUN_OPTIONS["a"], help="inverse-hull coarseness > 0 (default 0.2)")
+    r.add_argument("--method", type=RUN_OPTIONS["method"], help="exponential (default) or spherical")
+    r.add_argument("--seed", type=RUN_OPTIONS["seed"], help="seed of the error-measure surface samples (default 0)")
+    r.add_argument("--jobs", type=RUN_OPTIONS["jobs"], help="worker processes >= 1 (default 1)")
+    r.add_argument("--config", help="TOML file with the same option names (object, out, arm, mode, ...)")
+    r.add_argument("--format", type=RUN_OPTIONS["format"], help=f"estimate mesh format: {', '.join(MESH_FORMATS)} (default obj)")
+    g = r.add_mutually_exclusive_group()
+    g.add_argument("--scale", type=RUN_OPTIONS["scale"], help="scale the object by this factor")
+    g.add_argument("--size", type=RUN_OPTIONS["size"], help="rescale the object so its longest side is SIZE metres")
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    r.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
+    r.set_defaults(func=cmd_run)
+
+    c = sub.add_parser("reconstruct", help="inverse convex hull of a point file",
+                       description="Reconstruct a shape from POINTS (PLY/XYZ, metres) by the inverse convex hull. "
+                                   "3D points give a mesh (format from the --out suffix); points with z = 0 "
+                                   "(planar runs) give a polygon: --out X.json, or a mesh extruded by --height.")
+    c.add_argument("points", help="point file (PLY, XYZ, or anything trimesh loads)")
+    c.add_argument("--out", required=True, help="output mesh (.obj .stl .ply .off .glb) or polygon .json")
+    c.add_argument("--a", type=RUN_OPTIONS["a"], default=0.2, help="coarseness > 0 (default 0.2)")
+    c.add_argument("--method", type=RUN_OPTIONS["method"], default="exponential")
+    c.add_argument("--centre", type=_centre, default="midrange", help="mean, midrange (default) or x,y,z in metres")
+    c.add_argument("--height", type=_positive("--height"), help="2D points: extrude the polygon this many metres")
+    c.set_defaults(func=cmd_reconstruct)
+
+    e = sub.add_parser("evaluate", help="error measures of an estimate against the truth",
+                       description="Compare ESTIMATE with TRUTH: closed meshes (files, or built-in names for "
+                                   "TRUTH) or 2D polygons given as JSON lists of [x, y] (metres).")
+    e.add_argument("estimate")
+    e.add_argument("truth")
+    e.add_argument("--json", action="store_true", help="print JSON only")
+    e.set_defaults(func=cmd_evaluate)
+
+    t = sub.add_parser("table1", help="the paper's Table 1 next to ours",
+                       description="Reproduce Table 1 of the paper (explore3d.table1.table1_rows).")
+    t.add_argument("--json", action="store_true", help="print JSON")
+    t.set_defaults(func=cmd_table1)
+
+    a = sub.add_parser("arm", help="write an arm URDF",
+                       description="Write a chain arm URDF (explore3d.arm.write_arm_urdf); fields default to --base.")
+    a.add_argument("--out", required=True, help="URDF file to write")
+    a.add_argument("--base", default="default", help="arm to start from: paper, default or a URDF (default: default)")
+    a.add_argument("--name")
+    a.add_argument("--n-links", type=_int_min("--n-links"))
+    for fld in ("link_length", "link_width", "link_height", "link_mass", "max_torque", "base_size"):
+        a.add_argument("--" + fld.replace("_", "-"), type=_positive("--" + fld.replace("_", "-")),
+                       help="kg" if fld == "link_mass" else ("N m" if fld == "max_torque" else "metres"))
+    a.add_argument("--joint-lower", type=lambda s: _number(s, "--joint-lower"), help="rad, < 0")
+    a.add_argument("--joint-upper", type=lambda s: _number(s, "--joint-upper"), help="rad, > 0")
+    a.set_defaults(func=cmd_arm)
+
+    o = sub.add_parser("objects", help="list the built-in objects with their sizes",
+                       description="List the built-in objects (extents in mm, volume in cm^3).")
+    o.add_argument("--json", action="store_true")
+    o.set_defaults(func=cmd_objects)
+    return p
+
+
+def _version() -> str:
+    from . import __version__
+
+    return __version__
+
+
+# --- run -----------------------------------------------------------------------------------------
+
+def resolve_run_options(args) -> dict:
+    """Defaults < TOML config < flags, as a dict keyed like :data:`RUN_OPTIONS`."""
+    opts = dict(RUN_DEFAULTS)
+    if args.config:
+        cfg = read_toml_config(args.config)
+        if ("scale" in cfg or "size" in cfg) and (args.scale is not None or args.size is not None):
+            cfg.pop("scale", None)
+            cfg.pop("size", None)
+        opts.update(cfg)
+    for key in RUN_OPTIONS:
+        v = getattr(args, key, None)
+        if v is not None:
+            opts[key] = v
+    if not opts.get("out"):
+        raise UsageError("run needs an output folder: pass --out DIR (or out = \"DIR\" in --config)")
+    return opts
+
+
+def explore_config(opts: dict):
+    """The :class:`ExploreConfig` for resolved ``opts`` (unset fields keep ExploreConfig's defaults)."""
+    from .explore import ExploreConfig
+
+    kw = {k: opts[k] for k in _EXPLORE_KEYS if k in opts}
+    try:
+        return ExploreConfig(**kw)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _check_object_name(spec: str) -> None:
+    from .objects import BUILTIN_OBJECTS
+
+    if spec in BUILTIN_OBJECTS or spec.startswith("pybullet_data:"):
+        return
+    p = Path(spec)
+    if not p.exists() and not p.suffix and "/" not in spec and "\\" not in spec:
+        raise UsageError(f"unknown object {spec!r}; use a built-in name ({', '.join(BUILTIN_OBJECTS)}), "
+                         "a mesh file or pybullet_data:NAME (see 'explore3d objects')")
+
+
+def _prepare_out_dir(out: Path) -> None:
+    """Create ``out`` and check it is writable, before any simulation is spent."""
+    import tempfile
+
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise RunError(f"cannot write to output folder {out} ({exc.strerror or exc}); "
+                       "choose a writable --out folder") from None
+
+
+def package_versions() -> dict:
+    """Versions of explore3d and its main dependencies (for report.json)."""
+    from importlib import metadata
+
+    out = {"explore3d": _version()}
+    for name in ("numpy", "scipy", "trimesh", "pybullet", "shapely"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer, np.bool_)):
+        return o.item()
+    if hasattr(o, "value"):  # enums
+        return o.value
+    if isinstance(o, (set, frozenset, tuple)):
+        return list(o)
+    return str(o)
+
+
+def _dump(obj) -> str:
+    return json.dumps(obj, indent=2, default=_json_default) + "\n"
+
+
+def cmd_run(args) -> int:
+    opts = resolve_run_options(args)
+    _setup_logging(args.verbose)
+    out = Path(opts["out"])
+    _check_object_name(opts["object"])
+    config = explore_config(opts)
+
+    from .arm import load_arm
+
+    try:
+        spec = load_arm(opts["arm"])
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    _prepare_out_dir(out)
+
+    import numpy as np
+
+    from .explore import explore
+    from .export import write_estimate_urdf, write_mesh, write_points_ply
+    from .hull import inverse_hull
+    from .io import atomic_write_text
+    from .metrics import shape_error
+    from .objects import cross_section, load_object, object_size
+
+    mesh = load_object(opts["object"], scale=opts.get("scale"), size=opts.get("size"))
+    log.info("object %s: extents %s m", opts["object"], np.round(mesh.extents, 4).tolist())
+
+    bar = None
+    if not args.quiet:
+        from tqdm import tqdm
+
+        bar = tqdm(total=None, desc="wraps", unit="wrap", file=sys.stderr, leave=False)
+
+    def progress(done, total):
+        if bar is not None:
+            bar.total = total
+            bar.n = done
+            bar.refresh()
+        log.info("wrap %d/%d done", done, total)
+
+    try:
+        ex = explore(mesh, spec, config, progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+
+    report = {
+        "object": opts["object"], "mode": config.mode, "arm": opts["arm"], "n_wraps": ex.n_wraps,
+        "n_points": int(len(ex.points)), "n_contacts": ex.n_contacts, "a": opts["a"], "method": opts["method"],
+        "wall_s": ex.wall_s, "sim_s": ex.sim_time_s, "steps": ex.steps,
+        "config": {"explore": config.to_dict(), "arm": spec.to_dict(), "a": opts["a"], "method": opts["method"],
+                   "seed": opts["seed"], "centre": "midrange", "format": opts["format"],
+                   "scale": opts.get("scale"), "size": opts.get("size")},
+        "versions": package_versions(),
+    }
+    write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
+
+    if config.mode == "planar":
+        from .explore import rough_bound
+
+        z = float(rough_bound(mesh.vertices)[0][2])  # the arm's plane passes through the rough centre
+        truth = cross_section(mesh, z=z)
+        report["section_z_m"] = z
+    else:
+        truth = mesh
+
+    def fail(msg: str) -> int:
+        report["error"] = msg
+        atomic_write_text(out / "report.json", _dump(report))
+        raise RunError(f"{msg} (report written to {out / 'report.json'})")
+
+    if ex.n_contacts == 0:
+        return fail("no contacts at all: the arm never touched the object; check the object size against the arm "
+                    "(--size, --arm) or add --directions/--attempts")
+    try:
+        hull = inverse_hull(ex.points, centre="midrange", a=opts["a"], method=opts["method"])
+        estimate = hull.shape()
+        err = shape_error(estimate, truth, seed=opts["seed"])
+    except ValueError as exc:
+        return fail(f"reconstruction failed: {exc}")
+
+    report.update({
+        "percent_error": err.percent, "iou": err.iou, "chamfer_m": err.chamfer_m, "hausdorff_m": err.hausdorff_m,
+        "true_size": err.true_size, "estimate_size": err.estimate_size, "size_unit": "m^2" if err.dim == 2 else "m^3",
+        "errors": err.to_dict(),
+    })
+    fmt = opts["format"]
+    if config.mode == "planar":
+        import trimesh
+
+        poly = estimate
+        atomic_write_text(out / "estimate_polygon.json",
+                          _dump([[float(x), float(y)] for x, y in list(poly.exterior.coords)[:-1]]))
+        zlo, zhi = mesh.bounds[:, 2]
+        est_mesh = trimesh.creation.extrude_polygon(poly, float(zhi - zlo))
+        est_mesh.apply_translation([0.0, 0.0, float(zlo)])
+    else:
+        est_mesh = estimate
+    mesh_name = f"estimate.{fmt}"
+    write_mesh(est_mesh, out / mesh_name, fmt)
+    write_estimate_urdf(mesh_name, out / "estimate.urdf", mesh=est_mesh)
+    report["files"] = sorted([mesh_name, "estimate.urdf", "points.ply", "report.json"]
+                             + (["estimate_polygon.json"] if config.mode == "planar" else []))
+
+    try:
+        from . import pictures
+
+        report["files"] += pictures.run_pictures(out, ex, estimate, truth, mesh, err)
+    except ImportError as exc:  # pragma: no cover - matplotlib missing
+        log.warning("no pictures: %s", exc)
+    report["files"] = sorted(report["files"])
+    atomic_write_text(out / "report.json", _dump(report))
+    if not args.quiet:
+        print(f"{opts['object']}: {err.percent:.2f} % error, IoU {err.iou:.3f}, {ex.n_wraps} wraps, "
+              f"{len(ex.points)} points, {ex.wall_s:.1f} s -> {out}")
+    return 0
+
+
+# --- other commands ------------------------------------------------------------------------------
+
+def _extrude(poly, height: float, z0: float = 0.0):
+    import trimesh
+
+    m = trimesh.creation.extrude_polygon(poly, float(height))
+    m.apply_translation([0.0, 0.0, float(z0)])
+    return m
+
+
+def cmd_reconstruct(args) -> int:
+    from .export import check_format, points_2d_if_planar, read_points_ply, write_mesh
+    from .hull import inverse_hull
+    from .io import atomic_write_text
+
+    out = Path(args.out)
+    suffix = out.suffix.lower().lstrip(".")
+    if suffix != "json":
+        try:
+            check_format(suffix)
+        except ValueError as exc:
+            raise UsageError(f"--out {out}: {exc} (or .json for a 2D polygon)") from None
+    pts = points_2d_if_planar(read_points_ply(args.points))
+    centre = args.centre
+    if isinstance(centre, tuple):
+        if len(centre) != pts.shape[1]:
+            raise UsageError(f"--centre has {len(centre)} coordinates but the points are {pts.shape[1]}D")
+    hull = inverse_hull(pts, centre=centre, a=args.a, method=args.method)
+    if hull.dim == 2:
+        poly = hull.polygon
+        if suffix == "json":
+            atomic_write_text(out, _dump([[float(x), float(y)] for x, y in list(poly.exterior.coords)[:-1]]))
+        elif args.height is None:
+            raise UsageError("the points are 2D (z = 0): write a polygon with --out X.json or give --height M to extrude")
+        else:
+            write_mesh(_extrude(poly, args.height), out, suffix)
+        print(f"polygon of {len(hull.vertices)} vertices, area {poly.area:.6g} m^2 -> {out}")
+    else:
+        if suffix == "json":
+            raise UsageError("the points are 3D: --out must be a mesh file (.obj .stl .ply .off .glb)")
+        m = hull.mesh
+        write_mesh(m, out, suffix)
+        print(f"mesh of {len(m.vertices)} vertices, {len(m.faces)} faces, volume {m.volume:.6g} m^3 -> {out}")
+    return 0
+
+
+def _load_shape(spec: str, what: str):
+    """A shapely Polygon from a JSON list of [x, y] (metres), else a closed mesh via load_object."""
+    if spec.lower().endswith(".json"):
+        from shapely.geometry import Polygon
+
+        p = Path(spec)
+        if not p.is_file():
+            raise RunError(f"{what} file not found: {p}; check the path")
+        try:
+            data = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise RunError(f"cannot read {what} {p} as JSON ({exc}); give a list of [x, y] pairs in metres") from None
+        try:
+            poly = Polygon([(float(x), float(y)) for x, y in data])
+        except (TypeError, ValueError) as exc:
+            raise RunError(f"{what} {p} must be a JSON list of at least 3 [x, y] pairs ({exc})") from None
+        if not poly.is_valid or poly.area <= 0:
+            raise RunError(f"{what} {p} is not a valid polygon (self-intersecting or zero area)")
+        return poly
+    from .objects import load_object
+
+    _check_object_name(spec)
+    return load_object(spec)
+
+
+def cmd_evaluate(args) -> int:
+    from .metrics import shape_error
+
+    est = _load_shape(args.estimate, "estimate")
+    tru = _load_shape(args.truth, "truth")
+    err = shape_error(est, tru)
+    d = err.to_dict()
+    if args.json:
+        print(json.dumps(d, indent=2))
+        return 0
+    unit = "m^2" if err.dim == 2 else "m^3"
+    print(f"percent error  {err.percent:.3f} %")
+    print(f"IoU            {err.iou:.4f}")
+    print(f"chamfer        {err.chamfer_m * 1e3:.3f} mm")
+    print(f"hausdorff      {err.hausdorff_m * 1e3:.3f} mm")
+    print(f"true size      {err.true_size:.6g} {unit}")
+    print(f"estimate size  {err.estimate_size:.6g} {unit}")
+    print(json.dumps(d))
+    return 0
+
+
+def cmd_table1(args) -> int:
+    try:
+        from .table1 import table1_rows
+    except ImportError as exc:
+        raise RunError(f"explore3d.table1 is not available ({exc}); update explore3d") from None
+    rows = table1_rows()
+    if args.json:
+        print(_dump(rows), end="")
+        return 0
+    print(f"{'case':<24} {'paper m^2':>12} {'paper %':>8} {'ours m^2':>12} {'ours %':>8}")
+    for r in rows:
+        def f(v, w, p):
+            return f"{v:>{w}.{p}f}" if isinstance(v, (int, float)) and v is not None else f"{'-':>{w}}"
+        print(f"{str(r.get('case')):<24} {f(r.get('paper_area_error_m2'), 12, 6)} {f(r.get('paper_percent'), 8, 2)} "
+              f"{f(r.get('area_error_m2'), 12, 6)} {f(r.get('percent'), 8, 2)}")
+    return 0
+
+
+def arm_spec_from_args(args):
+    """The :class:`ArmSpec` of ``explore3d arm``: ``--base`` with the given fields replaced."""
+    import dataclasses
+
+    from .arm import load_arm
+
+    try:
+        base = load_arm(args.base)
+        fields = {f.name for f in dataclasses.fields(base)}
+        kw = {k: getattr(args, k) for k in fields if getattr(args, k, None) is not None}
+        return dataclasses.replace(base, **kw)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def cmd_arm(args) -> int:
+    from .arm import write_arm_urdf
+
+    spec = arm_spec_from_args(args)
+    path = write_arm_urdf(spec, args.out)
+    print(f"arm {spec.name}: {spec.n_links} links of {spec.link_length} m (reach {spec.reach:.3f} m) -> {path}")
+    return 0
+
+
+def cmd_objects(args) -> int:
+    from .objects import BUILTIN_OBJECTS, object_size
+
+    rows = []
+    for name, info in BUILTIN_OBJECTS.items():
+        s = object_size(info.builder())
+        rows.append({"name": name, "description": info.description, "extents_m": [float(x) for x in s["extents"]],
+                     "volume_m3": s["volume"], "bounding_radius_m": s["bounding_radius"]})
+    if args.json:
+        print(_dump(rows), end="")
+        return 0
+    for r in rows:
+        ext = " x ".join(f"{1e3 * x:.0f}" for x in r["extents_m"])
+        print(f"{r['name']:<12} {ext:>16} mm  {r['volume_m3'] * 1e6:8.1f} cm^3  {r['description']}")
+    return 0
+
+
+# --- entry point ---------------------------------------------------------------------------------
+
+def _setup_logging(verbose: int) -> None:
+    level = logging.WARNING if not verbose else (logging.INFO if verbose == 1 else logging.DEBUG)
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+    logging.getLogger("explore3d").setLevel(level)
+
+
+def _say(msg: str) -> None:
+    one_line = " ".join(str(msg).split())
+    print(f"{PROG}: error: {one_line}", file=sys.stderr)
+
+
+def main(argv=None) -> int:
+    """Run the command line ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        return int(args.func(args) or 0)
+    except SystemExit as exc:  # --help, --version
+        return exc.code if isinstance(exc.code, int) else 0
+    except UsageError as exc:
+        _say(exc)
+        return 2
+    except RunError as exc:
+        _say(exc)
+        return 1
+    except KeyboardInterrupt:
+        _say("interrupted")
+        return 130
+    except (ValueError, OSError) as exc:  # MeshError, NotAVolumeError, file errors
+        msg = str(exc) or type(exc).__name__
+        if isinstance(exc, OSError) and exc.filename is not None:
+            msg = f"{exc.strerror or exc} : {exc.filename}; check the path and permissions"
+        _say(msg)
+        return 1
