@@ -1,0 +1,90 @@
+"""Whole-arm encirclement in PyBullet: oracle-free, deterministic, and the paper's findings."""
+import numpy as np
+import pybullet
+import pytest
+import trimesh
+
+from explore3d.arm import ArmSpec
+from explore3d.encircle import ControlConfig, StopReason, calibrate_band, run_wrap
+from explore3d.explore import ExploreConfig, explore, rough_bound
+from explore3d.objects import cube, square
+from explore3d.pipeline import reconstruct_exploration
+from explore3d.sim import ArmSimulation
+
+#: A small arm (16 x 20 mm) keeps these tests fast; full-size runs live in scripts/ and BENCHMARKS.md.
+SMALL = ArmSpec(name="small16", n_links=16, link_length=0.02)
+
+
+def _planar(directions, mirrored=False, attempts=2, jobs=1, arm=SMALL):
+    return explore(cube(), arm, ExploreConfig(mode="planar", directions=directions, mirrored=mirrored,
+                                              attempts=attempts, jobs=jobs))
+
+
+def _area_err(ex, a=0.05):
+    c, R = rough_bound(cube().vertices)
+    poly = reconstruct_exploration(ex, c, R, a=a).polygon
+    truth = square()
+    return (poly.area + truth.area - 2 * poly.intersection(truth).area) / truth.area
+
+
+def test_exploration_never_queries_the_world(monkeypatch):
+    def forbidden(*a, **k):
+        raise AssertionError("exploration queried the world")
+
+    for name in ("getContactPoints", "getClosestPoints", "rayTest", "rayTestBatch", "getBasePositionAndOrientation",
+                 "getAABB", "getOverlappingObjects"):
+        monkeypatch.setattr(pybullet, name, forbidden)
+    ex = _planar(1, attempts=2)
+    assert ex.n_contacts > 0
+
+
+def test_bit_identical_and_independent_of_jobs():
+    a = _planar(2, mirrored=True, attempts=1, jobs=1)
+    b = _planar(2, mirrored=True, attempts=1, jobs=2)
+    for wa, wb in zip(a.attempts, b.attempts):
+        for x, y in zip(wa, wb):
+            assert np.array_equal(x.q, y.q)
+    assert np.array_equal(a.points, b.points)
+
+
+def test_free_space_gives_no_contacts():
+    band = calibrate_band(SMALL, ControlConfig(), base_transforms=[np.eye(4)])
+    with ArmSimulation(SMALL) as sim:
+        atts = run_wrap(sim, np.eye(4), band, attempts=1)
+    assert not atts[0].contact.any()
+    assert all(r is StopReason.LIMIT for r in atts[0].reasons)
+
+
+def test_contact_faces_touch_the_cube():
+    """Oracle check after the run: links whose joint detected contact lie close to the surface,
+    and nothing penetrates it by more than a millimetre."""
+    m = cube()
+    ex = _planar(3, attempts=1)
+    d = []
+    for w in ex.attempts:
+        for att in w:
+            from explore3d.kinematics import link_surface_points
+
+            P = link_surface_points(SMALL, att.q, att.T_world_base, n_along=5, n_height=1)
+            sd = trimesh.proximity.signed_distance(m, P.reshape(-1, 3)).reshape(SMALL.n_links, -1)
+            gap = -sd.max(axis=1)  # per link: distance of its closest face point (negative = inside)
+            assert gap.min() > -0.001, f"penetration {-gap.min():.4f} m"
+            # joint k's contact means something at or beyond link k touches: the nearest such link
+            beyond = np.minimum.accumulate(gap[::-1])[::-1]
+            d.extend(beyond[att.contact])
+    d = np.array(d)
+    assert np.median(d) < 0.002, f"median gap behind contact-flagged joints {np.median(d):.4f} m"
+    # Measured 2026-11-25: ~10% of detections (the last joints of the chain) have nothing within
+    # 5 mm; no bound is asserted on that fraction yet (see BENCHMARKS.md, open problems).
+
+
+def test_more_directions_are_better():
+    """The paper's finding: two directions beat one and three beat two."""
+    e1, e2, e3 = (_area_err(_planar(n, mirrored=(n == 2), attempts=4)) for n in (1, 2, 3))
+    assert e2 < e1 and e3 < e2, (e1, e2, e3)
+
+
+def test_many_small_links_beat_four_large():
+    small = _area_err(_planar(3, attempts=4), a=0.05)
+    large = _area_err(_planar(3, attempts=4, arm="paper"), a=0.05)
+    assert small < large, (small, large)
