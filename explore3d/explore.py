@@ -52,11 +52,11 @@ class ExploreConfig:
     """
 
     mode: str = "3d"
-    directions: int = 24
+    directions: int = 12
     mirrored: bool = False
-    offsets: int = 3
+    offsets: int = 2
     angles: int = 2
-    attempts: int = 2
+    attempts: int = 1
     base_step: float = 0.1
     clearance: float = 0.01
     n_along: int = 5

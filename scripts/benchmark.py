@@ -1,0 +1,68 @@
+"""Speed benchmark: wall time per wrap, steps/s, real-time factor, and our loop against bare
+``stepSimulation`` on the same scene; plus a default 3D reconstruction end to end.
+
+    python scripts/benchmark.py [--skip-3d]
+
+Prints a markdown table for BENCHMARKS.md.  Ratios are measured in one run (shared machines are noisy).
+"""
+import argparse
+import platform
+import time
+
+import numpy as np
+
+from explore3d import ArmSpec, ExploreConfig, load_arm, load_object, run
+from explore3d.encircle import ControlConfig, calibrate_band, run_wrap
+from explore3d.explore import planar_wrap_poses, rough_bound
+from explore3d.sim import ArmSimulation
+
+
+def bench_wrap(spec, repeats=5):
+    cube = load_object("cube")
+    c, R = rough_bound(cube.vertices)
+    pose = planar_wrap_poses(c, R, spec.link_width, 1)[0]
+    band = calibrate_band(spec, ControlConfig(), base_transforms=[np.eye(4)])
+    with ArmSimulation(spec, cube.vertices, cube.faces) as sim:
+        walls, steps = [], []
+        for _ in range(repeats):
+            s0 = sim.steps
+            t0 = time.perf_counter()
+            run_wrap(sim, pose.T_world_base, band, attempts=1)
+            walls.append(time.perf_counter() - t0)
+            steps.append(sim.steps - s0)
+        # bare stepping on the same scene, from the same start, the same number of steps
+        n = steps[0]
+        sim.set_base(pose.T_world_base)
+        sim.reset_joints(np.zeros(spec.n_links))
+        t0 = time.perf_counter()
+        for _ in range(n):
+            sim.client.stepSimulation()
+        bare = n / (time.perf_counter() - t0)
+    wall = float(np.median(walls))
+    sps = steps[0] / wall
+    return dict(arm=spec.name, links=spec.n_links, wall_per_wrap_s=wall, steps=steps[0], steps_per_s=sps,
+                realtime_factor=steps[0] * sim.config.timestep / wall, bare_steps_per_s=bare,
+                loop_overhead=bare / sps - 1.0)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--skip-3d", action="store_true")
+    args = ap.parse_args()
+    print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
+    print("| arm | links | wall/wrap (s) | steps | steps/s | real-time factor | bare steps/s | loop overhead |")
+    print("|---|---|---|---|---|---|---|---|")
+    for spec in (ArmSpec(name="small16", n_links=16, link_length=0.02), load_arm("default")):
+        r = bench_wrap(spec)
+        print(f"| {r['arm']} | {r['links']} | {r['wall_per_wrap_s']:.3f} | {r['steps']} | {r['steps_per_s']:.0f} | "
+              f"{r['realtime_factor']:.1f} | {r['bare_steps_per_s']:.0f} | {100 * r['loop_overhead']:.0f}% |")
+    if not args.skip_3d:
+        cfg = ExploreConfig(jobs=None)
+        t0 = time.perf_counter()
+        res = run(load_object("cube"), "default", cfg, a=0.1)
+        print(f"\n3D default on the cube: {res.exploration.n_wraps} wraps, {res.exploration.steps} steps, "
+              f"{time.perf_counter() - t0:.1f} s wall, volume error {res.error.percent:.1f}%, IoU {res.error.iou:.3f}")
+
+
+if __name__ == "__main__":
+    main()
