@@ -1,0 +1,343 @@
+"""Tests of the command line (explore3d.cli.main, called in-process)."""
+import json
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from explore3d.cli import build_parser, explore_config, main, resolve_run_options
+from explore3d.explore import ExploreConfig
+from explore3d.objects import builtin_object_names, load_object
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_one_line_error(err, *words):
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("explore3d: error: ")
+    assert "Traceback" not in err
+    for w in words:
+        assert w.lower() in lines[0].lower(), lines[0]
+
+
+# --- help and simple commands --------------------------------------------------------------------
+
+@pytest.mark.parametrize("cmd", [[], ["run"], ["reconstruct"], ["evaluate"], ["table1"], ["arm"], ["objects"]])
+def test_help(capsys, cmd):
+    code, out, _ = run(capsys, *cmd, "--help")
+    assert code == 0
+    assert "usage: explore3d" in out
+
+
+def test_no_command_is_usage_error(capsys):
+    code, _, err = run(capsys)
+    assert code == 2
+    assert_one_line_error(err)
+
+
+def test_objects_lists_builtins(capsys):
+    code, out, _ = run(capsys, "objects", "--json")
+    assert code == 0
+    rows = json.loads(out)
+    assert [r["name"] for r in rows] == builtin_object_names()
+    cube = rows[0]
+    np.testing.assert_allclose(cube["extents_m"], [0.08] * 3)
+    assert cube["volume_m3"] == pytest.approx(0.08 ** 3)
+    code, out, _ = run(capsys, "objects")
+    assert all(name in out for name in builtin_object_names())
+
+
+def test_arm_writes_loadable_urdf(tmp_path, capsys):
+    from explore3d.arm import load_arm
+
+    path = tmp_path / "tiny.urdf"
+    code, _, err = run(capsys, "arm", "--out", str(path), "--n-links", "8", "--link-length", "0.02",
+                       "--name", "tiny")
+    assert code == 0, err
+    spec = load_arm(str(path))
+    assert (spec.n_links, spec.link_length, spec.name) == (8, 0.02, "tiny")
+    assert spec.link_width == load_arm("default").link_width  # untouched fields come from --base
+
+
+@pytest.mark.parametrize("argv,word", [(["--n-links", "0"], "n-links"), (["--link-length", "-1"], "link-length"),
+                                       (["--joint-upper", "x"], "joint-upper"), (["--base", "nope"], "nope")])
+def test_arm_bad_values(tmp_path, capsys, argv, word):
+    code, _, err = run(capsys, "arm", "--out", str(tmp_path / "a.urdf"), *argv)
+    assert code == 2
+    assert_one_line_error(err, word)
+    assert not (tmp_path / "a.urdf").exists()
+
+
+# --- configuration parsing -----------------------------------------------------------------------
+
+def _parse(*argv):
+    return build_parser().parse_args(["run", *argv])
+
+
+def test_flags_into_explore_config():
+    opts = resolve_run_options(_parse("--out", "x", "--mode", "planar", "--directions", "2", "--attempts", "3"))
+    cfg = explore_config(opts)
+    assert isinstance(cfg, ExploreConfig)
+    assert (cfg.mode, cfg.directions, cfg.attempts) == ("planar", 2, 3)
+    assert cfg.offsets == ExploreConfig().offsets  # unset: the dataclass default
+    assert (opts["object"], opts["a"], opts["format"]) == ("cube", 0.2, "obj")
+
+
+def test_toml_config_and_flag_override(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('object = "sphere"\nout = "o"\nmode = "planar"\ndirections = 3\na = 0.5\nmethod = "spherical"\n'
+                   'format = "stl"\nn_along = 7\nmirrored = true\n')
+    opts = resolve_run_options(_parse("--config", str(cfg), "--a", "0.3", "--directions", "2"))
+    assert (opts["object"], opts["out"], opts["method"], opts["format"]) == ("sphere", "o", "spherical", "stl")
+    assert opts["a"] == 0.3 and opts["directions"] == 2  # flags win
+    c = explore_config(opts)
+    assert (c.mode, c.directions, c.n_along, c.mirrored) == ("planar", 2, 7, True)
+
+
+@pytest.mark.parametrize("text,word", [("bogus = 1\n", "bogus"), ("a = -1\n", "a"), ("jobs = 0\n", "jobs"),
+                                       ("format = \"dae\"\n", "dae"), ("a = [\n", "toml"),
+                                       ("mirrored = 3\n", "mirrored")])
+def test_bad_toml_is_usage_error(tmp_path, capsys, text, word):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text)
+    code, _, err = run(capsys, "run", "--config", str(cfg), "--out", str(tmp_path / "o"))
+    assert code == 2
+    assert_one_line_error(err, word)
+
+
+# --- bad inputs of run (all fail before any simulation) --------------------------------------------
+
+@pytest.mark.parametrize("argv,word", [
+    (["--a", "abc"], "number"),
+    (["--a", "0"], "> 0"),
+    (["--a", "-0.5"], "> 0"),
+    (["--directions", "two"], "directions"),
+    (["--attempts", "0"], "attempts"),
+    (["--jobs", "0"], "jobs"),
+    (["--format", "dae"], "dae"),
+    (["--mode", "4d"], "4d"),
+    (["--arm", "octopus"], "octopus"),
+    (["nonesuch"], "unknown object"),
+    (["--scale", "1", "--size", "1"], "not allowed"),
+    (["--bogus-flag"], "bogus-flag"),
+])
+def test_run_usage_errors(tmp_path, capsys, argv, word):
+    code, _, err = run(capsys, "run", "--out", str(tmp_path / "o"), *argv)
+    assert code == 2
+    assert_one_line_error(err, word)
+
+
+def test_run_needs_out(capsys):
+    code, _, err = run(capsys, "run", "cube")
+    assert code == 2
+    assert_one_line_error(err, "--out")
+
+
+def _open_cube(path):
+    """A cylinder without its top cap: a 32-edge hole that load_object does not fill."""
+    m = trimesh.creation.cylinder(radius=0.03, height=0.05, sections=32)
+    keep = m.face_normals[:, 2] < 0.9
+    trimesh.Trimesh(m.vertices, m.faces[keep], process=False).export(str(path))
+    return path
+
+
+@pytest.mark.parametrize("make,word", [
+    (lambda d: d / "missing.stl", "not found"),
+    (lambda d: (d / "notes.stl").write_text("this is not a mesh\n") and d / "notes.stl", "notes.stl"),
+    (lambda d: (d / "empty.obj").write_bytes(b"") or d / "empty.obj", "empty.obj"),
+    (lambda d: _open_cube(d / "open.stl"), "not a closed volume"),
+])
+def test_run_bad_object_files(tmp_path, capsys, make, word):
+    path = make(tmp_path)
+    code, _, err = run(capsys, "run", str(path), "--out", str(tmp_path / "o"), "-q")
+    assert code == 1
+    assert_one_line_error(err, word)
+    assert not (tmp_path / "o" / "report.json").exists()
+
+
+def test_run_unwritable_output(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    code, _, err = run(capsys, "run", "--out", str(blocker / "sub"), "-q")
+    assert code == 1
+    assert_one_line_error(err, "output folder")
+
+
+def test_run_no_contacts_writes_report(tmp_path, capsys, monkeypatch):
+    """An exploration without a single contact: report.json says so, exit 1."""
+    import explore3d.explore  # noqa: F401  (the module, not the function of the same name)
+
+    ex_mod = sys.modules["explore3d.explore"]
+    def fake_explore(mesh, arm, config, progress=None):
+        if progress:
+            progress(1, 1)
+        return types.SimpleNamespace(
+            n_wraps=1, n_contacts=0, points=np.zeros((0, 2)), point_wrap=np.zeros(0, int),
+            point_attempt=np.zeros(0, int), point_link=np.zeros(0, int), wall_s=0.0, sim_time_s=0.0, steps=0,
+            poses=(), attempts=((),))
+
+    monkeypatch.setattr(ex_mod, "explore", fake_explore)
+    out = tmp_path / "o"
+    code, _, err = run(capsys, "run", "--out", str(out), "--mode", "planar", "--directions", "1", "-q")
+    assert code == 1
+    assert_one_line_error(err, "no contacts")
+    report = json.loads((out / "report.json").read_text())
+    assert "no contacts" in report["error"]
+    assert report["n_points"] == 0 and "percent_error" not in report
+
+
+# --- reconstruct and evaluate ----------------------------------------------------------------------
+
+def test_reconstruct_sphere_points(tmp_path, capsys):
+    from explore3d.export import write_points_ply
+
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=(400, 3))
+    P = 0.05 * v / np.linalg.norm(v, axis=1, keepdims=True) + [0.1, 0.0, 0.02]
+    write_points_ply(P, tmp_path / "p.ply")
+    code, _, err = run(capsys, "reconstruct", str(tmp_path / "p.ply"), "--out", str(tmp_path / "m.stl"))
+    assert code == 0, err
+    m = trimesh.load(str(tmp_path / "m.stl"))
+    assert m.is_watertight
+    # points on a sphere are all on the inverse hull: the result is their convex hull
+    assert m.volume == pytest.approx(trimesh.convex.convex_hull(P).volume, rel=1e-4)
+
+
+def test_reconstruct_planar_points_to_polygon(tmp_path, capsys):
+    from explore3d.export import write_points_ply
+
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    P = np.column_stack([0.04 * np.cos(t), 0.04 * np.sin(t)])
+    write_points_ply(P, tmp_path / "p.ply")
+    code, _, err = run(capsys, "reconstruct", str(tmp_path / "p.ply"), "--out", str(tmp_path / "poly.json"),
+                       "--centre", "0,0")
+    assert code == 0, err
+    ring = np.array(json.loads((tmp_path / "poly.json").read_text()))
+    assert ring.shape == (60, 2)
+    code, _, err = run(capsys, "reconstruct", str(tmp_path / "p.ply"), "--out", str(tmp_path / "m.obj"))
+    assert code == 2
+    assert_one_line_error(err, "--height")
+
+
+@pytest.mark.parametrize("argv,code_,word", [
+    (["missing.ply", "--out", "m.obj"], 1, "not found"),
+    (["p.ply", "--out", "m.obj", "--a", "0"], 2, "> 0"),
+    (["p.ply", "--out", "m.obj", "--centre", "middle"], 2, "centre"),
+    (["p.ply", "--out", "m.dae"], 2, "dae"),
+])
+def test_reconstruct_errors(tmp_path, capsys, monkeypatch, argv, code_, word):
+    from explore3d.export import write_points_ply
+
+    write_points_ply(np.random.default_rng(0).normal(size=(30, 3)), tmp_path / "p.ply")
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run(capsys, "reconstruct", *argv)
+    assert code == code_
+    assert_one_line_error(err, word)
+
+
+def test_evaluate_meshes_known_answer(tmp_path, capsys):
+    from explore3d.export import write_mesh
+
+    big = load_object("cube", scale=1.1)  # about the cube's centre (the origin)
+    write_mesh(big, tmp_path / "big.off")
+    code, out, err = run(capsys, "evaluate", str(tmp_path / "big.off"), "cube", "--json")
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["percent"] == pytest.approx(100 * (1.1 ** 3 - 1), rel=1e-6)
+    assert d["iou"] == pytest.approx(1 / 1.1 ** 3, rel=1e-6)
+
+
+def test_evaluate_polygons(tmp_path, capsys):
+    (tmp_path / "a.json").write_text(json.dumps([[0, 0], [1, 0], [1, 1], [0, 1]]))
+    (tmp_path / "b.json").write_text(json.dumps([[0.5, 0], [1.5, 0], [1.5, 1], [0.5, 1]]))
+    code, out, err = run(capsys, "evaluate", str(tmp_path / "b.json"), str(tmp_path / "a.json"))
+    assert code == 0, err
+    d = json.loads(out.strip().splitlines()[-1])
+    assert d["percent"] == pytest.approx(100.0)  # A_err = 1 + 1 - 2 * 0.5
+    assert "IoU" in out
+
+
+def test_evaluate_bad_inputs(tmp_path, capsys):
+    (tmp_path / "bad.json").write_text("[[0, 0], [1]]")
+    code, _, err = run(capsys, "evaluate", str(tmp_path / "bad.json"), str(tmp_path / "bad.json"))
+    assert code == 1
+    assert_one_line_error(err, "bad.json")
+    code, _, err = run(capsys, "evaluate", str(_open_cube(tmp_path / "open.stl")), "cube")
+    assert code == 1
+    assert_one_line_error(err, "closed")
+
+
+# --- table1 (the lead's module; only the wiring is tested here) --------------------------------------
+
+def test_table1_wiring(capsys, monkeypatch):
+    rows = [{"case": "cube", "paper_area_error_m2": 1e-4, "paper_percent": 2.0, "area_error_m2": 5e-5, "percent": 1.0}]
+    fake = types.ModuleType("explore3d.table1")
+    fake.table1_rows = lambda: rows
+    monkeypatch.setitem(sys.modules, "explore3d.table1", fake)
+    code, out, _ = run(capsys, "table1", "--json")
+    assert code == 0
+    assert json.loads(out) == rows
+    code, out, _ = run(capsys, "table1")
+    assert code == 0 and "cube" in out and "2.00" in out
+
+
+# --- end to end ----------------------------------------------------------------------------------
+
+def test_run_planar_end_to_end(tmp_path, capsys):
+    import pybullet as p
+
+    from explore3d.export import read_points_ply
+    from explore3d.metrics import shape_error
+    from explore3d.objects import cross_section
+    from shapely.geometry import Polygon
+
+    arm = tmp_path / "tiny.urdf"
+    assert main(["arm", "--out", str(arm), "--n-links", "8", "--link-length", "0.02"]) == 0
+    out = tmp_path / "out"
+    code, stdout, err = run(capsys, "run", "cube", "--out", str(out), "--arm", str(arm), "--mode", "planar",
+                            "--directions", "1", "--attempts", "1", "--format", "stl", "-q")
+    assert code == 0, err
+    report = json.loads((out / "report.json").read_text())
+    assert report["object"] == "cube" and report["mode"] == "planar" and report["n_wraps"] == 1
+    assert report["config"]["explore"]["directions"] == 1
+    assert report["config"]["arm"]["n_links"] == 8
+    assert set(report["versions"]) >= {"explore3d", "numpy", "scipy", "trimesh", "pybullet", "shapely"}
+    for k in ("percent_error", "iou", "chamfer_m", "hausdorff_m", "true_size", "estimate_size", "wall_s",
+              "sim_s", "steps", "n_points"):
+        assert k in report
+
+    # the reported error is the error of the written polygon against the section at the centre
+    poly = Polygon(json.loads((out / "estimate_polygon.json").read_text()))
+    err_ = shape_error(poly, cross_section(load_object("cube"), 0.0))
+    assert report["percent_error"] == pytest.approx(err_.percent, rel=1e-9)
+    assert report["true_size"] == pytest.approx(0.08 ** 2)
+
+    # extruded estimate: the polygon times the cube's height
+    m = trimesh.load(str(out / "estimate.stl"))
+    assert m.volume == pytest.approx(poly.area * 0.08, rel=1e-5)
+
+    pts, props = read_points_ply(out / "points.ply", with_properties=True)
+    assert len(pts) == report["n_points"]
+    np.testing.assert_array_equal(props["wrap"], 0)
+    np.testing.assert_allclose(pts[:, 2], 0.0)
+
+    cid = p.connect(p.DIRECT)
+    try:
+        p.loadURDF(str(out / "estimate.urdf"), physicsClientId=cid)
+    finally:
+        p.disconnect(cid)
+
+    for png in ("figure.png", "overview.png"):
+        data = (out / png).read_bytes()
+        assert data.startswith(PNG_MAGIC) and len(data) > 5000
+    assert sorted(report["files"]) == sorted(f.name for f in out.iterdir())
