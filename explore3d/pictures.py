@@ -102,11 +102,20 @@ def planar_figure(exploration, estimate_polygon, truth_polygon, path, err=None, 
 VIEWS = ((25.0, -60.0), (90.0, -90.0), (0.0, -90.0), (0.0, 0.0))
 VIEW_NAMES = ("iso", "top", "front", "side")
 
+#: At most this many link points are drawn in a 3D view (readability and file size).
+MAX_DRAWN_POINTS = 3000
+
 
 def _draw_mesh_views(fig, axes_slots, estimate_mesh, truth_mesh, points=None):
     lo = np.minimum(estimate_mesh.bounds[0], truth_mesh.bounds[0])
     hi = np.maximum(estimate_mesh.bounds[1], truth_mesh.bounds[1])
     c, r = (lo + hi) / 2.0, float((hi - lo).max()) / 2.0
+    P = None
+    if points is not None and len(points):
+        P = np.asarray(points, dtype=float)
+        P = P[np.all(np.abs(P - c) <= r, axis=1)]  # 3D axes do not clip: drop points outside the view
+        if len(P) > MAX_DRAWN_POINTS:  # fixed subsample: the same picture for the same run
+            P = P[np.random.default_rng(0).choice(len(P), MAX_DRAWN_POINTS, replace=False)]
     for slot, (elev, azim), name in zip(axes_slots, VIEWS, VIEW_NAMES):
         ax = fig.add_subplot(*slot, projection="3d")
         v, f = truth_mesh.vertices, truth_mesh.faces
@@ -114,8 +123,7 @@ def _draw_mesh_views(fig, axes_slots, estimate_mesh, truth_mesh, points=None):
         v, f = estimate_mesh.vertices, estimate_mesh.faces
         ax.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=f, color="tab:blue", alpha=0.6,
                         edgecolor="navy", linewidth=0.2)
-        if points is not None and len(points):
-            P = np.asarray(points)
+        if P is not None and len(P):
             ax.scatter(P[:, 0], P[:, 1], P[:, 2], s=1, color="crimson", alpha=0.4)
         ax.set_xlim(c[0] - r, c[0] + r)
         ax.set_ylim(c[1] - r, c[1] + r)
@@ -165,7 +173,7 @@ def scene_image(truth_mesh, spec, attempt, width: int = 480, height: int = 360) 
             p.resetJointState(arm, j, float(qj), physicsClientId=cid)
         lo, hi = truth_mesh.bounds
         target = ((lo + hi) / 2.0).tolist()
-        dist = 3.0 * float(np.linalg.norm(hi - lo)) + 0.1
+        dist = 2.0 * float(np.linalg.norm(hi - lo)) + 0.05
         view = p.computeViewMatrixFromYawPitchRoll(target, dist, 30.0, -35.0, 0.0, 2, physicsClientId=cid)
         proj = p.computeProjectionMatrixFOV(40.0, width / height, 0.01, 10.0, physicsClientId=cid)
         img = p.getCameraImage(width, height, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=cid)
