@@ -115,3 +115,34 @@ def test_read_points_other_files(tmp_path):
     (tmp_path / "text.ply").write_text("hello, not a ply\n")
     with pytest.raises(ValueError):
         read_points_ply(tmp_path / "text.ply")
+
+
+# --- pictures (explore3d.pictures; no simulation needed) ------------------------------------------
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def test_3d_pictures_are_pngs(tmp_path):
+    import types
+
+    from explore3d import pictures
+    from explore3d.arm import ArmSpec
+    from explore3d.metrics import shape_error
+
+    truth = load_object("cube")
+    est = load_object("sphere")
+    err = shape_error(est, truth)
+    pts = np.random.default_rng(0).uniform(-0.05, 0.05, size=(5000, 3))
+    pictures.views_figure(est, truth, tmp_path / "views.png", points=pts, err=err)
+    spec = ArmSpec(name="tiny", n_links=6)
+    T = np.eye(4)
+    T[:3, 3] = [-0.06, -0.05, 0.0]
+    attempt = types.SimpleNamespace(q=np.full(6, 0.3), T_world_base=T)
+    scene = pictures.scene_image(truth, spec, attempt, width=160, height=120)
+    assert scene.shape == (120, 160, 3) and scene.dtype == np.uint8
+    assert scene.std() > 1.0  # not a blank image
+    pictures.overview_figure(tmp_path / "overview.png", {"error %": err.percent}, estimate_mesh=est,
+                             truth_mesh=truth, points=pts, scene=scene)
+    for name in ("views.png", "overview.png"):
+        data = (tmp_path / name).read_bytes()
+        assert data.startswith(PNG_MAGIC) and len(data) > 5000
