@@ -456,7 +456,8 @@ def cmd_run(args) -> int:
     write_mesh(est_mesh, out / mesh_name, fmt)
     write_estimate_urdf(mesh_name, out / "estimate.urdf", mesh=est_mesh)
     report["files"] = sorted([mesh_name, "estimate.urdf", "points.ply", "report.json"]
-                             + (["estimate_polygon.json"] if config.mode == "planar" else []))
+                             + (["estimate_polygon.json"] if config.mode == "planar" else [])
+                             + ([] if fmt in ("obj", "stl") else ["estimate.obj"]))  # PyBullet's copy
 
     try:
         from . import pictures

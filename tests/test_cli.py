@@ -305,7 +305,7 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     assert main(["arm", "--out", str(arm), "--n-links", "8", "--link-length", "0.02"]) == 0
     out = tmp_path / "out"
     code, stdout, err = run(capsys, "run", "cube", "--out", str(out), "--arm", str(arm), "--mode", "planar",
-                            "--directions", "1", "--attempts", "1", "--format", "stl", "-q")
+                            "--directions", "1", "--attempts", "1", "--format", "off", "-q")
     assert code == 0, err
     report = json.loads((out / "report.json").read_text())
     assert report["object"] == "cube" and report["mode"] == "planar" and report["n_wraps"] == 1
@@ -323,7 +323,7 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     assert report["true_size"] == pytest.approx(0.08 ** 2)
 
     # extruded estimate: the polygon times the cube's height
-    m = trimesh.load(str(out / "estimate.stl"))
+    m = trimesh.load(str(out / "estimate.off"))
     assert m.volume == pytest.approx(poly.area * 0.08, rel=1e-5)
 
     pts, props = read_points_ply(out / "points.ply", with_properties=True)
@@ -333,7 +333,7 @@ def test_run_planar_end_to_end(tmp_path, capsys):
 
     cid = p.connect(p.DIRECT)
     try:
-        p.loadURDF(str(out / "estimate.urdf"), physicsClientId=cid)
+        p.loadURDF(str(out / "estimate.urdf"), physicsClientId=cid)  # via the OBJ copy of the OFF
     finally:
         p.disconnect(cid)
 
