@@ -15,9 +15,11 @@ Heavy modules (numpy, trimesh, pybullet, matplotlib) are imported inside the com
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -354,6 +356,28 @@ def _dump(obj) -> str:
     return json.dumps(obj, indent=2, default=_json_default) + "\n"
 
 
+@contextlib.contextmanager
+def _silence_fd(fd: int):
+    """Send the C-level output on file descriptor ``fd`` to /dev/null (PyBullet prints its build
+    time to stderr on import and solver banners to stdout on connect)."""
+    stream = {1: sys.stdout, 2: sys.stderr}[fd]
+    try:
+        stream.flush()
+        saved = os.dup(fd)
+    except (OSError, ValueError, AttributeError):  # no real descriptor (embedded use): leave it
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), fd)
+        yield
+    finally:
+        with contextlib.suppress(OSError, ValueError):
+            stream.flush()
+        os.dup2(saved, fd)
+        os.close(saved)
+
+
 def cmd_run(args) -> int:
     opts = resolve_run_options(args)
     _setup_logging(args.verbose)
@@ -371,6 +395,8 @@ def cmd_run(args) -> int:
 
     import numpy as np
 
+    with _silence_fd(2):
+        import pybullet  # noqa: F401  (its build-time banner would be a second stderr line)
     from .explore import explore
     from .export import write_estimate_urdf, write_mesh, write_points_ply
     from .hull import inverse_hull
@@ -395,7 +421,8 @@ def cmd_run(args) -> int:
         log.info("wrap %d/%d done", done, total)
 
     try:
-        ex = explore(mesh, spec, config, progress=progress)
+        with _silence_fd(1):  # PyBullet's solver banners; progress goes to stderr
+            ex = explore(mesh, spec, config, progress=progress)
     finally:
         if bar is not None:
             bar.close()
@@ -462,7 +489,8 @@ def cmd_run(args) -> int:
     try:
         from . import pictures
 
-        report["files"] += pictures.run_pictures(out, ex, estimate, truth, mesh, err)
+        with _silence_fd(1):
+            report["files"] += pictures.run_pictures(out, ex, estimate, truth, mesh, err)
     except ImportError as exc:  # pragma: no cover - matplotlib missing
         log.warning("no pictures: %s", exc)
     report["files"] = sorted(report["files"])
