@@ -341,3 +341,28 @@ def test_run_planar_end_to_end(tmp_path, capsys):
         data = (out / png).read_bytes()
         assert data.startswith(PNG_MAGIC) and len(data) > 5000
     assert sorted(report["files"]) == sorted(f.name for f in out.iterdir())
+
+
+# --- the real entry point (one subprocess each; C-level output included) ----------------------------
+
+def _python(*code_or_args):
+    import os
+    import subprocess
+
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    return subprocess.run([sys.executable, *code_or_args], capture_output=True, text=True, env=env, timeout=60)
+
+
+def test_help_imports_no_heavy_modules():
+    """--help adds no heavy import beyond what ``import explore3d`` itself loads."""
+    heavy = "('numpy', 'scipy', 'trimesh', 'shapely', 'pybullet', 'matplotlib', 'tqdm')"
+    r = _python("-c", "import sys; import explore3d; before = set(sys.modules); from explore3d.cli import main; "
+                      f"main(['run', '--help']); print(sorted(m for m in {heavy} if m in sys.modules and m not in before))")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_module_entry_point_usage_error(tmp_path):
+    r = _python("-m", "explore3d", "run", "cube", "--out", str(tmp_path / "o"), "--a", "0")
+    assert r.returncode == 2
+    assert_one_line_error(r.stderr, "> 0")
