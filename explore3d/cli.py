@@ -242,6 +242,8 @@ def build_parser() -> argparse.ArgumentParser:
     t = sub.add_parser("table1", help="the paper's Table 1 next to ours",
                        description="Reproduce Table 1 of the paper (explore3d.table1.table1_rows).")
     t.add_argument("--json", action="store_true", help="print JSON")
+    t.add_argument("--a", type=RUN_OPTIONS["a"], help="inverse-hull coarseness > 0 (default: table1_rows' own, 0.2)")
+    t.add_argument("--seed", type=RUN_OPTIONS["seed"], help="seed of the simulated many-links case")
     t.set_defaults(func=cmd_table1)
 
     a = sub.add_parser("arm", help="write an arm URDF",
@@ -595,12 +597,16 @@ def cmd_evaluate(args) -> int:
 
 def cmd_table1(args) -> int:
     try:
-        from .table1 import table1_rows
+        from . import table1
     except ImportError as exc:
         raise RunError(f"explore3d.table1 is not available ({exc}); update explore3d") from None
-    rows = table1_rows()
+    kw = {k: getattr(args, k) for k in ("a", "seed") if getattr(args, k) is not None}
+    rows = table1.table1_rows(**kw)
     if args.json:
         print(_dump(rows), end="")
+        return 0
+    if hasattr(table1, "format_table"):
+        print(table1.format_table(rows))
         return 0
     print(f"{'case':<24} {'paper m^2':>12} {'paper %':>8} {'ours m^2':>12} {'ours %':>8}")
     for r in rows:

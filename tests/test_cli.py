@@ -282,11 +282,18 @@ def test_evaluate_bad_inputs(tmp_path, capsys):
 def test_table1_wiring(capsys, monkeypatch):
     rows = [{"case": "cube", "paper_area_error_m2": 1e-4, "paper_percent": 2.0, "area_error_m2": 5e-5, "percent": 1.0}]
     fake = types.ModuleType("explore3d.table1")
-    fake.table1_rows = lambda: rows
+    calls = []
+    fake.table1_rows = lambda **kw: calls.append(kw) or rows
     monkeypatch.setitem(sys.modules, "explore3d.table1", fake)
+    monkeypatch.delattr("explore3d.table1", raising=False)  # the package attribute, if the real one was imported
     code, out, _ = run(capsys, "table1", "--json")
     assert code == 0
     assert json.loads(out) == rows
+    code, out, _ = run(capsys, "table1", "--json", "--a", "0.1", "--seed", "3")
+    assert code == 0 and calls[-1] == {"a": 0.1, "seed": 3}
+    code, _, err = run(capsys, "table1", "--a", "0")
+    assert code == 2
+    assert_one_line_error(err, "> 0")
     code, out, _ = run(capsys, "table1")
     assert code == 0 and "cube" in out and "2.00" in out
 
