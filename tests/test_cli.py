@@ -349,6 +349,13 @@ def test_run_planar_end_to_end(tmp_path, capsys):
         assert data.startswith(PNG_MAGIC) and len(data) > 5000
     assert sorted(report["files"]) == sorted(f.name for f in out.iterdir())
 
+    # reconstruct from the written points gives the run's polygon (float32 storage aside)
+    code, _, err = run(capsys, "reconstruct", str(out / "points.ply"), "--out", str(tmp_path / "re.json"))
+    assert code == 0, err
+    again = Polygon(json.loads((tmp_path / "re.json").read_text()))
+    assert again.area == pytest.approx(poly.area, rel=1e-5)
+    assert again.symmetric_difference(poly).area < 1e-6 * poly.area
+
 
 # --- the real entry point (one subprocess each; C-level output included) ----------------------------
 
