@@ -129,7 +129,7 @@ def sweep_torque_limits(spec: ArmSpec, cfg: ControlConfig) -> np.ndarray:
 
 
 def run_attempt(sim: ArmSimulation, T_world_base, band: ContactBand | None, cfg: ControlConfig = ControlConfig(),
-                base_stop: float | None = None, record: bool = False, _errors: list | None = None, _debug: list | None = None) -> Attempt:
+                base_stop: float | None = None, record: bool = False, _errors: list | None = None) -> Attempt:
     """One attempt from the base pose ``T_world_base`` (4, 4).
 
     Args:
@@ -191,9 +191,6 @@ def run_attempt(sim: ArmSimulation, T_world_base, band: ContactBand | None, cfg:
                     _errors.append((k, lag2, sig2))
                 if band is not None and i > 0 and (lag2 > band.swept[k] or (np.abs(sig2) > band.other).any()):
                     reason = StopReason.CONTACT
-                    if _debug is not None:
-                        trig = np.flatnonzero(np.abs(sig2) > band.other)
-                        _debug.append(("trigger", k, i, round(float(lag2), 4), [(int(j), round(float(sig2[j]), 4)) for j in trig]))
                     break
                 if q_ref[k] >= stop:
                     reason = StopReason.STOP_ANGLE if (k == 0 and base_stop is not None) else StopReason.LIMIT

@@ -190,9 +190,6 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
     c0, r0 = rough_bound(mesh.vertices)
     centre = c0 if centre is None else np.asarray(centre, float)
     radius = r0 if radius is None else float(radius)
-    if config.mode == "planar":
-        # the arm's plane passes through the rough centre: put it at z = centre z
-        pass
     poses = wrap_poses(spec, config, centre, radius)
     band = _band(spec, config.control, config.sim, config.mode == "planar")
     vertices = np.asarray(mesh.vertices, dtype=float)
