@@ -117,6 +117,15 @@ def _centre(text):
     return tuple(_number(p, "--centre coordinate") for p in parts)
 
 
+def _point3(text):
+    """The rough object centre for ``run``: "x,y,z" (or a TOML list of 3 numbers), metres."""
+    parts = list(text) if isinstance(text, (list, tuple)) else \
+        [p for p in str(text).replace(";", ",").split(",") if p.strip()]
+    if len(parts) != 3:
+        raise UsageError(f"--centre must be x,y,z in metres (the object's rough centre); got {text!r}")
+    return tuple(_number(p, "--centre coordinate") for p in parts)
+
+
 #: Options of ``run`` that a TOML config may set, with their checkers (flag name = key with '-').
 RUN_OPTIONS = {
     "object": str,
@@ -140,6 +149,10 @@ RUN_OPTIONS = {
     "clearance": _positive("--clearance"),
     "n_along": _int_min("--n_along"),
     "n_height": _int_min("--n_height"),
+    # the robot's rough bound of the object (default: from the mesh, explore3d.explore.rough_bound)
+    "centre": _point3,
+    "radius": _positive("--radius"),
+    "no_pictures": None,  # bool
 }
 RUN_DEFAULTS = {"object": "cube", "arm": "default", "mode": "3d", "a": 0.2, "method": "exponential", "seed": 0,
                 "format": "obj"}
@@ -172,8 +185,8 @@ def read_toml_config(path) -> dict:
         if key not in RUN_OPTIONS:
             raise UsageError(f"unknown key {k!r} in config {path}; valid keys: {', '.join(sorted(RUN_OPTIONS))}")
         check = RUN_OPTIONS[key]
-        if key == "mirrored":
-            out[key] = _check_bool(v, "mirrored")
+        if key in ("mirrored", "no_pictures"):
+            out[key] = _check_bool(v, key)
         elif check is str:
             if not isinstance(v, str):
                 raise UsageError(f"{k} in config {path} must be a string; got {v!r}")
@@ -215,6 +228,13 @@ def build_parser() -> argparse.ArgumentParser:
     g = r.add_mutually_exclusive_group()
     g.add_argument("--scale", type=RUN_OPTIONS["scale"], help="scale the object by this factor")
     g.add_argument("--size", type=RUN_OPTIONS["size"], help="rescale the object so its longest side is SIZE metres")
+    r.add_argument("--centre", type=RUN_OPTIONS["centre"],
+                   help="x,y,z: the object's rough centre the robot is told, metres (default: its bounding-box centre)")
+    r.add_argument("--radius", type=RUN_OPTIONS["radius"],
+                   help="the object's rough bounding radius the robot is told, metres (default: 1.05 x the largest "
+                        "vertex distance from the centre); contact points beyond it are dropped")
+    r.add_argument("--no-pictures", dest="no_pictures", action="store_true", default=None,
+                   help="skip the PNG pictures (faster)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     r.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
     r.set_defaults(func=cmd_run)
@@ -227,7 +247,11 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--out", required=True, help="output mesh (.obj .stl .ply .off .glb) or polygon .json")
     c.add_argument("--a", type=RUN_OPTIONS["a"], default=0.2, help="coarseness > 0 (default 0.2)")
     c.add_argument("--method", type=RUN_OPTIONS["method"], default="exponential")
-    c.add_argument("--centre", type=_centre, default="midrange", help="mean, midrange (default) or x,y,z in metres")
+    c.add_argument("--centre", type=_centre, default="midrange",
+                   help="mean, midrange (default) or x,y[,z] in metres (2D points use x,y)")
+    c.add_argument("--radius", type=_positive("--radius"),
+                   help="drop points farther than this many metres from --centre (as 'run' does with its rough "
+                        "bound: report.json's config.centre_m and config.radius_m)")
     c.add_argument("--height", type=_positive("--height"), help="2D points: extrude the polygon this many metres")
     c.set_defaults(func=cmd_reconstruct)
 
@@ -399,15 +423,14 @@ def cmd_run(args) -> int:
 
     with _silence_fd(2):
         import pybullet  # noqa: F401  (its build-time banner would be a second stderr line)
-    from .explore import explore
     from .export import write_estimate_urdf, write_mesh, write_points_ply
-    from .hull import inverse_hull
     from .io import atomic_write_text
-    from .metrics import shape_error
-    from .objects import cross_section, load_object, object_size
+    from .objects import load_object
+    from .pipeline import NoContactError, ReconstructionError, rough_bound_or, run
 
     mesh = load_object(opts["object"], scale=opts.get("scale"), size=opts.get("size"))
     log.info("object %s: extents %s m", opts["object"], np.round(mesh.extents, 4).tolist())
+    centre, radius = rough_bound_or(mesh, opts.get("centre"), opts.get("radius"))
 
     bar = None
     if not args.quiet:
@@ -422,63 +445,59 @@ def cmd_run(args) -> int:
             bar.refresh()
         log.info("wrap %d/%d done", done, total)
 
+    report = {
+        "object": opts["object"], "mode": config.mode, "arm": opts["arm"],
+        "config": {"explore": config.to_dict(), "arm": spec.to_dict(), "a": opts["a"], "method": opts["method"],
+                   "seed": opts["seed"], "centre_m": [float(x) for x in centre], "radius_m": radius,
+                   "rough_bound": "given" if ("centre" in opts or "radius" in opts) else "rough_bound(mesh)",
+                   "format": opts["format"], "scale": opts.get("scale"), "size": opts.get("size"),
+                   "pictures": not opts.get("no_pictures", False)},
+        "versions": package_versions(),
+    }
+
+    def exploration_fields(ex) -> dict:
+        return {"n_wraps": ex.n_wraps, "n_points": int(len(ex.points)), "n_contacts": ex.n_contacts,
+                "a": opts["a"], "method": opts["method"], "wall_s": ex.wall_s, "sim_s": ex.sim_time_s,
+                "steps": ex.steps}
+
+    def fail(ex, msg: str) -> int:
+        report.update(exploration_fields(ex))
+        report["error"] = msg
+        write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
+        atomic_write_text(out / "report.json", _dump(report))
+        raise RunError(f"{msg} (report written to {out / 'report.json'})")
+
     try:
         with _silence_fd(1):  # PyBullet's solver banners; progress goes to stderr
-            ex = explore(mesh, spec, config, progress=progress)
+            res = run(mesh, spec, config, a=opts["a"], method=opts["method"], progress=progress,
+                      centre=centre, radius=radius, seed=opts["seed"])
+    except NoContactError as exc:
+        return fail(exc.exploration, "no contacts at all: the arm never touched the object; check the object size "
+                                     "and rough bound against the arm (--size, --arm, --centre, --radius) or add "
+                                     "--directions/--attempts")
+    except ReconstructionError as exc:
+        return fail(exc.exploration, f"reconstruction failed: {exc}")
     finally:
         if bar is not None:
             bar.close()
 
-    report = {
-        "object": opts["object"], "mode": config.mode, "arm": opts["arm"], "n_wraps": ex.n_wraps,
-        "n_points": int(len(ex.points)), "n_contacts": ex.n_contacts, "a": opts["a"], "method": opts["method"],
-        "wall_s": ex.wall_s, "sim_s": ex.sim_time_s, "steps": ex.steps,
-        "config": {"explore": config.to_dict(), "arm": spec.to_dict(), "a": opts["a"], "method": opts["method"],
-                   "seed": opts["seed"], "centre": "midrange", "format": opts["format"],
-                   "scale": opts.get("scale"), "size": opts.get("size")},
-        "versions": package_versions(),
-    }
-    write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
-
+    ex, err, estimate = res.exploration, res.error, res.estimate
+    report.update(exploration_fields(ex))
+    report["n_points_used"] = res.n_points_used
     if config.mode == "planar":
-        from .explore import rough_bound
-
-        z = float(rough_bound(mesh.vertices)[0][2])  # the arm's plane passes through the rough centre
-        truth = cross_section(mesh, z=z)
-        report["section_z_m"] = z
-    else:
-        truth = mesh
-
-    def fail(msg: str) -> int:
-        report["error"] = msg
-        atomic_write_text(out / "report.json", _dump(report))
-        raise RunError(f"{msg} (report written to {out / 'report.json'})")
-
-    if ex.n_contacts == 0:
-        return fail("no contacts at all: the arm never touched the object; check the object size against the arm "
-                    "(--size, --arm) or add --directions/--attempts")
-    try:
-        hull = inverse_hull(ex.points, centre="midrange", a=opts["a"], method=opts["method"])
-        estimate = hull.shape()
-        err = shape_error(estimate, truth, seed=opts["seed"])
-    except ValueError as exc:
-        return fail(f"reconstruction failed: {exc}")
-
+        report["section_z_m"] = float(res.centre[2])  # the arm's plane passes through the rough centre
     report.update({
         "percent_error": err.percent, "iou": err.iou, "chamfer_m": err.chamfer_m, "hausdorff_m": err.hausdorff_m,
         "true_size": err.true_size, "estimate_size": err.estimate_size, "size_unit": "m^2" if err.dim == 2 else "m^3",
         "errors": err.to_dict(),
     })
+    write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
     fmt = opts["format"]
     if config.mode == "planar":
-        import trimesh
-
-        poly = estimate
         atomic_write_text(out / "estimate_polygon.json",
-                          _dump([[float(x), float(y)] for x, y in list(poly.exterior.coords)[:-1]]))
+                          _dump([[float(x), float(y)] for x, y in list(estimate.exterior.coords)[:-1]]))
         zlo, zhi = mesh.bounds[:, 2]
-        est_mesh = trimesh.creation.extrude_polygon(poly, float(zhi - zlo))
-        est_mesh.apply_translation([0.0, 0.0, float(zlo)])
+        est_mesh = _extrude(estimate, float(zhi - zlo), float(zlo))
     else:
         est_mesh = estimate
     mesh_name = f"estimate.{fmt}"
@@ -488,13 +507,14 @@ def cmd_run(args) -> int:
                              + (["estimate_polygon.json"] if config.mode == "planar" else [])
                              + ([] if fmt in ("obj", "stl") else ["estimate.obj"]))  # PyBullet's copy
 
-    try:
-        from . import pictures
+    if not opts.get("no_pictures", False):
+        try:
+            from . import pictures
 
-        with _silence_fd(1):
-            report["files"] += pictures.run_pictures(out, ex, estimate, truth, mesh, err)
-    except ImportError as exc:  # pragma: no cover - matplotlib missing
-        log.warning("no pictures: %s", exc)
+            with _silence_fd(1):
+                report["files"] += pictures.run_pictures(out, ex, estimate, res.truth, mesh, err)
+        except ImportError as exc:  # pragma: no cover - matplotlib missing
+            log.warning("no pictures: %s", exc)
     report["files"] = sorted(report["files"])
     atomic_write_text(out / "report.json", _dump(report))
     if not args.quiet:
@@ -525,11 +545,24 @@ def cmd_reconstruct(args) -> int:
             check_format(suffix)
         except ValueError as exc:
             raise UsageError(f"--out {out}: {exc} (or .json for a 2D polygon)") from None
-    pts = points_2d_if_planar(read_points_ply(args.points))
     centre = args.centre
+    if args.radius is not None and not isinstance(centre, tuple):
+        raise UsageError("--radius needs an explicit --centre x,y[,z] (the rough centre it is measured from, metres)")
+    pts = points_2d_if_planar(read_points_ply(args.points))
     if isinstance(centre, tuple):
+        if len(centre) == 3 and pts.shape[1] == 2:  # a run's rough centre (x, y, z) for its planar points
+            centre = centre[:2]
         if len(centre) != pts.shape[1]:
             raise UsageError(f"--centre has {len(centre)} coordinates but the points are {pts.shape[1]}D")
+        if args.radius is not None:
+            from .pipeline import within_bound
+
+            kept = pts[within_bound(pts, centre, args.radius)]
+            if len(kept) <= pts.shape[1]:
+                raise RunError(f"only {len(kept)} of {len(pts)} points lie within --radius {args.radius:g} m of "
+                               f"--centre {','.join(f'{x:g}' for x in centre)}; check both (see report.json's "
+                               "config.centre_m and config.radius_m)")
+            pts = kept
     hull = inverse_hull(pts, centre=centre, a=args.a, method=args.method)
     if hull.dim == 2:
         poly = hull.polygon

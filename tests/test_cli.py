@@ -1,5 +1,6 @@
 """Tests of the command line (explore3d.cli.main, called in-process)."""
 import json
+import math
 import sys
 import types
 from pathlib import Path
@@ -28,6 +29,15 @@ def assert_one_line_error(err, *words):
     assert "Traceback" not in err
     for w in words:
         assert w.lower() in lines[0].lower(), lines[0]
+
+
+#: A small arm (16 x 20 mm, reach 0.32 m) keeps each simulated run here to about a second.
+@pytest.fixture(scope="module")
+def small_arm(tmp_path_factory):
+    from explore3d import ArmSpec, write_arm_urdf
+
+    return write_arm_urdf(ArmSpec(name="small16", n_links=16, link_length=0.02),
+                          tmp_path_factory.mktemp("arm") / "small16.urdf")
 
 
 # --- help and simple commands --------------------------------------------------------------------
@@ -173,27 +183,28 @@ def test_run_unwritable_output(tmp_path, capsys):
     assert_one_line_error(err, "output folder")
 
 
-def test_run_no_contacts_writes_report(tmp_path, capsys, monkeypatch):
-    """An exploration without a single contact: report.json says so, exit 1."""
-    import explore3d.explore  # noqa: F401  (the module, not the function of the same name)
-
-    ex_mod = sys.modules["explore3d.explore"]
-    def fake_explore(mesh, arm, config, progress=None):
-        if progress:
-            progress(1, 1)
-        return types.SimpleNamespace(
-            n_wraps=1, n_contacts=0, points=np.zeros((0, 2)), point_wrap=np.zeros(0, int),
-            point_attempt=np.zeros(0, int), point_link=np.zeros(0, int), wall_s=0.0, sim_time_s=0.0, steps=0,
-            poses=(), attempts=((),))
-
-    monkeypatch.setattr(ex_mod, "explore", fake_explore)
+def test_run_no_contacts_writes_report(tmp_path, capsys, small_arm):
+    """A real exploration that touches nothing (the robot is told the object is 1 m away): exit 1,
+    a one-line error naming the fix, and a report of the wraps that were run."""
     out = tmp_path / "o"
-    code, _, err = run(capsys, "run", "--out", str(out), "--mode", "planar", "--directions", "1", "-q")
+    code, _, err = run(capsys, "run", "cube", "--out", str(out), "--arm", str(small_arm), "--mode", "planar",
+                       "--directions", "1", "--attempts", "1", "--centre", "1,0,0", "--radius", "0.06", "-q")
     assert code == 1
-    assert_one_line_error(err, "no contacts")
+    assert_one_line_error(err, "no contacts", "--centre", "--size", "--arm")
     report = json.loads((out / "report.json").read_text())
     assert "no contacts" in report["error"]
-    assert report["n_points"] == 0 and "percent_error" not in report
+    assert report["n_contacts"] == 0 and report["n_wraps"] == 1 and report["steps"] > 0
+    assert report["n_points"] > 0 and "percent_error" not in report
+    assert report["config"]["centre_m"] == [1.0, 0.0, 0.0] and report["config"]["radius_m"] == 0.06
+    assert not (out / "estimate.obj").exists()
+
+
+@pytest.mark.parametrize("argv,word", [(["--centre", "1,0"], "x,y,z"), (["--centre", "a,b,c"], "centre"),
+                                       (["--radius", "0"], "> 0"), (["--radius", "-1"], "radius")])
+def test_run_bad_rough_bound(tmp_path, capsys, argv, word):
+    code, _, err = run(capsys, "run", "cube", "--out", str(tmp_path / "o"), *argv)
+    assert code == 2
+    assert_one_line_error(err, word)
 
 
 # --- reconstruct and evaluate ----------------------------------------------------------------------
@@ -312,11 +323,11 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     assert main(["arm", "--out", str(arm), "--n-links", "8", "--link-length", "0.02"]) == 0
     out = tmp_path / "out"
     code, stdout, err = run(capsys, "run", "cube", "--out", str(out), "--arm", str(arm), "--mode", "planar",
-                            "--directions", "1", "--attempts", "1", "--format", "off", "-q")
+                            "--directions", "3", "--attempts", "1", "--format", "off", "-q")
     assert code == 0, err
     report = json.loads((out / "report.json").read_text())
-    assert report["object"] == "cube" and report["mode"] == "planar" and report["n_wraps"] == 1
-    assert report["config"]["explore"]["directions"] == 1
+    assert report["object"] == "cube" and report["mode"] == "planar" and report["n_wraps"] == 3
+    assert report["config"]["explore"]["directions"] == 3
     assert report["config"]["arm"]["n_links"] == 8
     assert set(report["versions"]) >= {"explore3d", "numpy", "scipy", "trimesh", "pybullet", "shapely"}
     for k in ("percent_error", "iou", "chamfer_m", "hausdorff_m", "true_size", "estimate_size", "wall_s",
@@ -335,7 +346,7 @@ def test_run_planar_end_to_end(tmp_path, capsys):
 
     pts, props = read_points_ply(out / "points.ply", with_properties=True)
     assert len(pts) == report["n_points"]
-    np.testing.assert_array_equal(props["wrap"], 0)
+    np.testing.assert_array_equal(np.unique(props["wrap"]), [0, 1, 2])
     np.testing.assert_allclose(pts[:, 2], 0.0)
 
     cid = p.connect(p.DIRECT)
@@ -350,11 +361,90 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     assert sorted(report["files"]) == sorted(f.name for f in out.iterdir())
 
     # reconstruct from the written points gives the run's polygon (float32 storage aside)
-    code, _, err = run(capsys, "reconstruct", str(out / "points.ply"), "--out", str(tmp_path / "re.json"))
+    # with the run's rough centre and radius
+    centre = ",".join(str(x) for x in report["config"]["centre_m"])
+    code, _, err = run(capsys, "reconstruct", str(out / "points.ply"), "--out", str(tmp_path / "re.json"),
+                       "--a", str(report["a"]), "--centre", centre, "--radius", str(report["config"]["radius_m"]))
     assert code == 0, err
     again = Polygon(json.loads((tmp_path / "re.json").read_text()))
     assert again.area == pytest.approx(poly.area, rel=1e-5)
     assert again.symmetric_difference(poly).area < 1e-6 * poly.area
+
+
+# --- run is explore3d.run; every built-in object and a pybullet_data mesh ----------------------------
+
+_FAST = {"planar": ["--mode", "planar", "--directions", "3", "--attempts", "1"],
+         "3d": ["--mode", "3d", "--directions", "3", "--offsets", "1", "--angles", "1", "--attempts", "1"]}
+
+
+@pytest.mark.parametrize("mode", ["planar", "3d"])
+def test_cli_and_api_give_the_same_estimate(tmp_path, capsys, small_arm, mode):
+    """``explore3d run`` and ``explore3d.run`` with the same configuration: the same numbers."""
+    from explore3d import ExploreConfig
+    from explore3d import run as api_run
+
+    out = tmp_path / "o"
+    code, _, err = run(capsys, "run", "l_block", "--out", str(out), "--arm", str(small_arm), *_FAST[mode],
+                       "--a", "0.1", "--seed", "3", "--no-pictures", "-q")
+    assert code == 0, err
+    report = json.loads((out / "report.json").read_text())
+    kw = {"offsets": 1, "angles": 1} if mode == "3d" else {}
+    res = api_run(load_object("l_block"), str(small_arm), ExploreConfig(mode=mode, directions=3, attempts=1, **kw),
+                  a=0.1, seed=3)
+    assert res.n_points_used < len(res.exploration.points)  # points beyond the rough radius were dropped
+    assert (report["n_points"], report["n_points_used"]) == (len(res.exploration.points), res.n_points_used)
+    for key, value in [("percent_error", res.error.percent), ("iou", res.error.iou),
+                       ("chamfer_m", res.error.chamfer_m), ("hausdorff_m", res.error.hausdorff_m),
+                       ("true_size", res.error.true_size), ("estimate_size", res.error.estimate_size)]:
+        assert report[key] == value, key
+    np.testing.assert_array_equal(report["config"]["centre_m"], res.centre)
+    assert report["config"]["radius_m"] == res.radius
+    if mode == "planar":
+        ring = np.array(json.loads((out / "estimate_polygon.json").read_text()))
+        np.testing.assert_array_equal(ring, np.asarray(res.estimate.exterior.coords)[:-1])
+
+
+ALL_OBJECTS = [*builtin_object_names(), "pybullet_data:duck_vhacd.obj"]
+
+
+@pytest.mark.parametrize("mode", ["planar", "3d"])
+@pytest.mark.parametrize("obj", ALL_OBJECTS)
+def test_run_every_object(tmp_path, capsys, small_arm, obj, mode):
+    """A fast run on each object: a report with finite errors against the right truth, an estimate
+    mesh that loads as a closed volume, inside the robot's rough bound."""
+    from shapely.ops import unary_union
+
+    from explore3d import rough_bound
+    from explore3d.objects import cross_section
+
+    size = ["--size", "0.1"] if obj.startswith("pybullet_data:") else []
+    out = tmp_path / "o"
+    code, _, err = run(capsys, "run", obj, *size, "--out", str(out), "--arm", str(small_arm), *_FAST[mode],
+                       "--no-pictures", "-q")
+    assert code == 0, err
+    report = json.loads((out / "report.json").read_text())
+    assert math.isfinite(report["percent_error"]) and report["percent_error"] >= 0
+    assert 0 < report["iou"] <= 1 and report["n_contacts"] > 0
+    assert 0 < report["n_points_used"] <= report["n_points"]
+
+    mesh = load_object(obj, size=0.1 if size else None)
+    c, radius = rough_bound(mesh.vertices)
+    np.testing.assert_allclose(report["config"]["centre_m"], c, rtol=0, atol=1e-15)
+    if mode == "planar":  # the truth is the section through the rough centre (bodies merged)
+        truth_size = unary_union(list(getattr(s := cross_section(mesh, c[2]), "geoms", [s]))).area
+    else:
+        truth_size = mesh.volume
+    assert report["true_size"] == pytest.approx(truth_size, rel=1e-9)
+
+    est = trimesh.load(str(out / "estimate.obj"))
+    assert isinstance(est, trimesh.Trimesh) and est.is_watertight and est.volume > 0
+    if mode == "planar":
+        ring = np.array(json.loads((out / "estimate_polygon.json").read_text()))
+        assert np.linalg.norm(ring - c[:2], axis=1).max() <= radius * (1 + 1e-12)
+        assert est.volume == pytest.approx(report["estimate_size"] * mesh.extents[2], rel=1e-5)
+    else:
+        assert np.linalg.norm(est.vertices - c, axis=1).max() <= radius + 1e-7  # OBJ keeps 8 decimals
+        assert est.volume == pytest.approx(report["estimate_size"], rel=1e-5)
 
 
 # --- the real entry point (one subprocess each; C-level output included) ----------------------------
