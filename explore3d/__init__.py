@@ -7,18 +7,52 @@ convex hull (see ``explore3d.hull``).  Units are SI everywhere (metres, radians,
 The public API::
 
     from explore3d import load_object, run, ExploreConfig, inverse_hull, shape_error
+
+The names are imported on first use (PEP 562), so ``import explore3d`` and ``explore3d --help``
+load neither numpy nor trimesh nor pybullet.
 """
+import importlib
+import sys
+import types
+
 __version__ = "0.1.0"
 
-from .arm import BUILTIN_ARMS, ArmSpec, load_arm, write_arm_urdf
-from .explore import Exploration, ExploreConfig, explore, rough_bound
-from .hull import InverseHull, inverse_hull
-from .metrics import ShapeError, shape_error
-from .objects import BUILTIN_OBJECTS, load_object
-from .pipeline import NoContactError, Result, reconstruct_exploration, run
+#: Public name -> the submodule that defines it.
+_EXPORTS = {
+    "ArmSpec": "arm", "BUILTIN_ARMS": "arm", "load_arm": "arm", "write_arm_urdf": "arm",
+    "Exploration": "explore", "ExploreConfig": "explore", "explore": "explore", "rough_bound": "explore",
+    "InverseHull": "hull", "inverse_hull": "hull",
+    "ShapeError": "metrics", "shape_error": "metrics",
+    "BUILTIN_OBJECTS": "objects", "load_object": "objects",
+    "NoContactError": "pipeline", "ReconstructionError": "pipeline", "Result": "pipeline",
+    "reconstruct_exploration": "pipeline", "run": "pipeline",
+}
 
-__all__ = [
-    "ArmSpec", "BUILTIN_ARMS", "BUILTIN_OBJECTS", "Exploration", "ExploreConfig", "InverseHull", "NoContactError",
-    "Result", "ShapeError", "explore", "inverse_hull", "load_arm", "load_object", "reconstruct_exploration",
-    "rough_bound", "run", "shape_error", "write_arm_urdf",
-]
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'explore3d' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
+
+
+class _Package(types.ModuleType):
+    """The package's module type: importing the submodule ``explore3d.explore`` must not replace
+    the public function ``explore3d.explore`` (Python sets a package attribute for every loaded
+    submodule); the submodule stays available as ``sys.modules["explore3d.explore"]``."""
+
+    def __setattr__(self, name, value):
+        if name == "explore" and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

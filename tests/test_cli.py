@@ -457,13 +457,35 @@ def _python(*code_or_args):
     return subprocess.run([sys.executable, *code_or_args], capture_output=True, text=True, env=env, timeout=60)
 
 
-def test_help_imports_no_heavy_modules():
-    """--help adds no heavy import beyond what ``import explore3d`` itself loads."""
-    heavy = "('numpy', 'scipy', 'trimesh', 'shapely', 'pybullet', 'matplotlib', 'tqdm')"
-    r = _python("-c", "import sys; import explore3d; before = set(sys.modules); from explore3d.cli import main; "
-                      f"main(['run', '--help']); print(sorted(m for m in {heavy} if m in sys.modules and m not in before))")
+HEAVY = ("numpy", "scipy", "trimesh", "shapely", "pybullet", "matplotlib", "tqdm")
+
+
+@pytest.mark.parametrize("argv", [["-m", "explore3d", "--help"], ["-m", "explore3d", "run", "--help"],
+                                  # what the installed console script does
+                                  ["-c", "import sys; from explore3d.cli import main; sys.exit(main(['run', '--help']))"]])
+def test_help_imports_no_heavy_modules(argv):
+    """``explore3d --help`` and ``explore3d run --help`` import none of the heavy dependencies
+    (read from ``python -X importtime``, which lists every module the process imported)."""
+    r = _python("-X", "importtime", *argv)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.strip().splitlines()[-1] == "[]"
+    assert "usage: explore3d" in r.stdout
+    imported = {line.split("|")[-1].strip().split(".")[0] for line in r.stderr.splitlines() if "|" in line}
+    assert "explore3d" in imported and "argparse" in imported  # the listing works
+    assert sorted(imported & set(HEAVY)) == []
+
+
+def test_public_names_are_lazy():
+    """``import explore3d`` is light; each public name loads on first use, ``explore`` stays the function
+    even after its submodule is imported, and ``dir``/``__all__`` list every name."""
+    code = ("import sys, explore3d; light = sorted(m for m in %r if m in sys.modules); "
+            "import explore3d.explore; from explore3d import explore, run, __all__; import explore3d as e; "
+            "print(light, callable(explore) and explore.__module__, run.__module__, "
+            "all(n in dir(e) and getattr(e, n) is not None for n in __all__))" % (HEAVY,))
+    r = _python("-c", code)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["[]", "explore3d.explore", "explore3d.pipeline", "True"]
+    r = _python("-c", "import explore3d; explore3d.nonesuch")
+    assert r.returncode == 1 and "has no attribute 'nonesuch'" in r.stderr
 
 
 def test_module_entry_point_usage_error(tmp_path):
