@@ -84,16 +84,28 @@ def reconstruct_exploration(ex: Exploration, centre, radius: float, a: float = 0
 
 def planar_truth(mesh, z: float):
     """The true 2D shape of the planar case: the mesh's cross-section at height ``z`` metres
-    (x-y, world frame, metres).  Sections of several bodies that touch or overlap (convex
-    decompositions such as pybullet_data's ``*_vhacd.obj``) are merged into their union."""
+    (x-y, world frame, metres).
+
+    A mesh of several bodies (convex decompositions such as pybullet_data's ``*_vhacd.obj`` have
+    touching or overlapping pieces, whose joint section trimesh gets wrong) is cut body by body:
+    the union of the sections of positive-volume bodies minus those of inward-wound ones (cavities).
+    """
     from shapely.ops import unary_union
 
     from .objects import cross_section
 
-    section = cross_section(mesh, z=z)
-    if not section.is_valid:
-        section = unary_union(list(getattr(section, "geoms", [section])))
-    return section
+    bodies = mesh.split(only_watertight=False) if mesh.body_count > 1 else [mesh]
+    if len(bodies) == 1:
+        return cross_section(mesh, z=z)
+    solid, cavities = [], []
+    for body in bodies:
+        zlo, zhi = body.bounds[:, 2]
+        if zlo < z < zhi:
+            (solid if body.volume > 0 else cavities).append(cross_section(body, z=z))
+    if not solid:
+        return cross_section(mesh, z=z)  # raises: the plane misses the mesh
+    region = unary_union(solid)
+    return region.difference(unary_union(cavities)) if cavities else region
 
 
 def rough_bound_or(mesh, centre=None, radius=None) -> tuple[np.ndarray, float]:

@@ -412,10 +412,8 @@ ALL_OBJECTS = [*builtin_object_names(), "pybullet_data:duck_vhacd.obj"]
 def test_run_every_object(tmp_path, capsys, small_arm, obj, mode):
     """A fast run on each object: a report with finite errors against the right truth, an estimate
     mesh that loads as a closed volume, inside the robot's rough bound."""
-    from shapely.ops import unary_union
-
     from explore3d import rough_bound
-    from explore3d.objects import cross_section
+    from explore3d.pipeline import planar_truth
 
     size = ["--size", "0.1"] if obj.startswith("pybullet_data:") else []
     out = tmp_path / "o"
@@ -430,8 +428,8 @@ def test_run_every_object(tmp_path, capsys, small_arm, obj, mode):
     mesh = load_object(obj, size=0.1 if size else None)
     c, radius = rough_bound(mesh.vertices)
     np.testing.assert_allclose(report["config"]["centre_m"], c, rtol=0, atol=1e-15)
-    if mode == "planar":  # the truth is the section through the rough centre (bodies merged)
-        truth_size = unary_union(list(getattr(s := cross_section(mesh, c[2]), "geoms", [s]))).area
+    if mode == "planar":  # the truth is the section through the rough centre (tests/test_pipeline.py)
+        truth_size = planar_truth(mesh, c[2]).area
     else:
         truth_size = mesh.volume
     assert report["true_size"] == pytest.approx(truth_size, rel=1e-9)

@@ -1,0 +1,116 @@
+"""explore3d.run (the pipeline): the robot's rough bound, no-contact and reconstruction failures
+without mocks, and the planar truth of multi-body meshes."""
+import numpy as np
+import pytest
+import trimesh
+
+from explore3d import ArmSpec, ExploreConfig, NoContactError, ReconstructionError, load_object, rough_bound, run
+from explore3d.objects import cross_section
+from explore3d.pipeline import planar_truth, within_bound
+
+#: 8 x 20 mm links (reach 0.16 m): a wrap in empty space takes a fraction of a second.
+TINY = ArmSpec(name="tiny8", n_links=8, link_length=0.02)
+PLANAR1 = ExploreConfig(mode="planar", directions=1, attempts=1)
+
+
+def _one_line(msg: str) -> str:
+    assert "\n" not in msg, msg
+    return msg
+
+
+@pytest.mark.parametrize("case", ["rough centre 1 m away", "object far too big for the arm"])
+def test_no_contact_is_real_and_named(case):
+    """The arm genuinely touches nothing: NoContactError with the wraps that were run and the fix."""
+    if case == "rough centre 1 m away":
+        mesh, kw = load_object("cube"), {"centre": (1.0, 0.0, 0.0), "radius": 0.06}
+    else:
+        mesh, kw = load_object("cube", size=3.0), {}  # the wrap starts on a 2.7 m bound; the arm reaches 0.16 m
+    with pytest.raises(NoContactError) as info:
+        run(mesh, TINY, PLANAR1, **kw)
+    ex = info.value.exploration
+    assert ex is not None and ex.n_contacts == 0 and ex.n_wraps == 1 and ex.steps > 0
+    assert len(ex.points) == TINY.n_links * PLANAR1.n_along  # the arm's final pose was still recorded
+    msg = _one_line(str(info.value))
+    for fix in ("arm", "size", "centre", "radius"):
+        assert fix in msg
+
+
+def test_wrong_rough_bound_is_what_the_robot_uses():
+    """With the rough centre 1 m away the wrap is placed there: every link point is near it, none near the cube."""
+    c = np.array([1.0, 0.0, 0.0])
+    with pytest.raises(NoContactError) as info:
+        run(load_object("cube"), TINY, PLANAR1, centre=c, radius=0.06)
+    P = info.value.exploration.points
+    assert np.linalg.norm(P - c[:2], axis=1).max() < 0.06 + 0.01 + TINY.reach + TINY.link_width
+    assert np.linalg.norm(P, axis=1).min() > 0.5
+
+
+def test_points_not_around_the_centre_raise_reconstruction_error():
+    """One short wrap from one side does not surround the rough centre: a ValueError naming the fix."""
+    with pytest.raises(ReconstructionError) as info:
+        run(load_object("cube"), TINY, PLANAR1)
+    assert isinstance(info.value, ValueError)
+    assert info.value.exploration.n_contacts > 0
+    msg = _one_line(str(info.value))
+    assert "outside the convex hull" in msg and "directions" in msg
+
+
+@pytest.mark.parametrize("kw,word", [({"centre": (0.0, 0.0)}, "3 components"),
+                                     ({"centre": (0.0, np.nan, 0.0)}, "finite"),
+                                     ({"radius": 0.0}, "radius"), ({"radius": -1.0}, "radius")])
+def test_bad_rough_bound(kw, word):
+    with pytest.raises(ValueError) as info:
+        run(load_object("cube"), TINY, PLANAR1, **kw)
+    assert word in _one_line(str(info.value))
+
+
+def test_run_positional_call_progress_and_result():
+    """The documented positional signature; the hull uses exactly the points within the rough radius."""
+    calls = []
+    arm = ArmSpec(name="small16", n_links=16, link_length=0.02)
+    res = run(load_object("cylinder"), arm, ExploreConfig(mode="planar", directions=3, attempts=1), 0.1,
+              "exponential", lambda done, total: calls.append((done, total)))
+    assert calls == [(1, 3), (2, 3), (3, 3)]
+    c, radius = rough_bound(load_object("cylinder").vertices)
+    np.testing.assert_array_equal(res.centre, c)
+    assert res.radius == radius
+    P = res.exploration.points
+    inside = np.linalg.norm(P - c[:2], axis=1) <= radius
+    assert res.n_points_used == int(inside.sum()) == len(res.hull.points)
+    assert 0 < res.n_points_used < len(P)
+    assert res.estimate.equals(res.hull.polygon)
+    assert np.linalg.norm(np.asarray(res.estimate.exterior.coords) - c[:2], axis=1).max() <= radius
+    assert np.isfinite(res.error.percent) and 0 < res.error.iou <= 1
+
+
+def test_within_bound():
+    P = np.array([[0.0, 0.0], [0.1, 0.0], [0.2, 0.0]])
+    np.testing.assert_array_equal(within_bound(P, (0.05, 0.0, 9.0), 0.05), [True, True, False])
+
+
+@pytest.mark.parametrize("dx,dy", [(0.03, 0.03), (0.02, 0.0), (0.04, 0.0), (0.02, 0.01)])
+def test_planar_truth_of_overlapping_and_touching_bodies(dx, dy):
+    """Two 40 mm boxes, the second moved by (dx, dy) (as pieces of a convex decomposition): the
+    planar truth is their union (trimesh's joint section of such meshes is wrong, see the first assert)."""
+    a = trimesh.creation.box([0.04, 0.04, 0.04])
+    b = trimesh.creation.box([0.04, 0.04, 0.04])
+    b.apply_translation([dx, dy, 0.0])
+    mesh = trimesh.util.concatenate([a, b])
+    union_area = 2 * 0.04 ** 2 - (0.04 - dx) * (0.04 - dy)
+    joint = cross_section(mesh, 0.0)
+    assert not (joint.is_valid and joint.area == pytest.approx(union_area, rel=1e-9))  # the case being handled
+    truth = planar_truth(mesh, 0.0)
+    assert truth.is_valid and truth.geom_type == "Polygon"
+    assert truth.area == pytest.approx(union_area, rel=1e-9)
+
+
+def test_planar_truth_keeps_cavities_and_single_bodies():
+    outer = trimesh.creation.box([0.06, 0.06, 0.06])
+    inner = trimesh.creation.box([0.02, 0.02, 0.02])
+    inner.invert()  # an inward-wound inner shell: a cavity
+    hollow = planar_truth(trimesh.util.concatenate([outer, inner]), 0.0)
+    assert hollow.area == pytest.approx(0.06 ** 2 - 0.02 ** 2, rel=1e-9)
+    cube = load_object("cube")
+    assert planar_truth(cube, 0.01).equals(cross_section(cube, 0.01))  # one body: the section as it is
+    with pytest.raises(ValueError, match="does not cut"):
+        planar_truth(trimesh.util.concatenate([outer, inner]), 1.0)
