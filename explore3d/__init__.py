@@ -25,7 +25,7 @@ _EXPORTS = {
     "ShapeError": "metrics", "shape_error": "metrics",
     "BUILTIN_OBJECTS": "objects", "load_object": "objects",
     "NoContactError": "pipeline", "ReconstructionError": "pipeline", "Result": "pipeline",
-    "reconstruct_exploration": "pipeline", "run": "pipeline",
+    "reconstruct_exploration": "pipeline", "run": "pipeline", "write_result": "pipeline",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -423,10 +423,10 @@ def cmd_run(args) -> int:
 
     with _silence_fd(2):
         import pybullet  # noqa: F401  (its build-time banner would be a second stderr line)
-    from .export import write_estimate_urdf, write_mesh, write_points_ply
+    from .export import write_points_ply
     from .io import atomic_write_text
     from .objects import load_object
-    from .pipeline import NoContactError, ReconstructionError, rough_bound_or, run
+    from .pipeline import NoContactError, ReconstructionError, exploration_summary, rough_bound_or, run, write_result
 
     mesh = load_object(opts["object"], scale=opts.get("scale"), size=opts.get("size"))
     log.info("object %s: extents %s m", opts["object"], np.round(mesh.extents, 4).tolist())
@@ -446,7 +446,7 @@ def cmd_run(args) -> int:
         log.info("wrap %d/%d done", done, total)
 
     report = {
-        "object": opts["object"], "mode": config.mode, "arm": opts["arm"],
+        "object": opts["object"], "mode": config.mode, "arm": opts["arm"], "a": opts["a"], "method": opts["method"],
         "config": {"explore": config.to_dict(), "arm": spec.to_dict(), "a": opts["a"], "method": opts["method"],
                    "seed": opts["seed"], "centre_m": [float(x) for x in centre], "radius_m": radius,
                    "rough_bound": "given" if ("centre" in opts or "radius" in opts) else "rough_bound(mesh)",
@@ -455,13 +455,8 @@ def cmd_run(args) -> int:
         "versions": package_versions(),
     }
 
-    def exploration_fields(ex) -> dict:
-        return {"n_wraps": ex.n_wraps, "n_points": int(len(ex.points)), "n_contacts": ex.n_contacts,
-                "a": opts["a"], "method": opts["method"], "wall_s": ex.wall_s, "sim_s": ex.sim_time_s,
-                "steps": ex.steps}
-
     def fail(ex, msg: str) -> int:
-        report.update(exploration_fields(ex))
+        report.update(exploration_summary(ex))
         report["error"] = msg
         write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
         atomic_write_text(out / "report.json", _dump(report))
@@ -481,41 +476,22 @@ def cmd_run(args) -> int:
         if bar is not None:
             bar.close()
 
-    ex, err, estimate = res.exploration, res.error, res.estimate
-    report.update(exploration_fields(ex))
-    report["n_points_used"] = res.n_points_used
+    ex, err = res.exploration, res.error
+    summary = res.summary()
+    for k in ("centre_m", "radius_m"):  # already in config
+        summary.pop(k)
+    report.update(summary)
+    report["errors"] = err.to_dict()
     if config.mode == "planar":
         report["section_z_m"] = float(res.centre[2])  # the arm's plane passes through the rough centre
-    report.update({
-        "percent_error": err.percent, "iou": err.iou, "chamfer_m": err.chamfer_m, "hausdorff_m": err.hausdorff_m,
-        "true_size": err.true_size, "estimate_size": err.estimate_size, "size_unit": "m^2" if err.dim == 2 else "m^3",
-        "errors": err.to_dict(),
-    })
-    write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
-    fmt = opts["format"]
-    if config.mode == "planar":
-        atomic_write_text(out / "estimate_polygon.json",
-                          _dump([[float(x), float(y)] for x, y in list(estimate.exterior.coords)[:-1]]))
-        zlo, zhi = mesh.bounds[:, 2]
-        est_mesh = _extrude(estimate, float(zhi - zlo), float(zlo))
-    else:
-        est_mesh = estimate
-    mesh_name = f"estimate.{fmt}"
-    write_mesh(est_mesh, out / mesh_name, fmt)
-    write_estimate_urdf(mesh_name, out / "estimate.urdf", mesh=est_mesh)
-    report["files"] = sorted([mesh_name, "estimate.urdf", "points.ply", "report.json"]
-                             + (["estimate_polygon.json"] if config.mode == "planar" else [])
-                             + ([] if fmt in ("obj", "stl") else ["estimate.obj"]))  # PyBullet's copy
-
-    if not opts.get("no_pictures", False):
+    pictures = not opts.get("no_pictures", False)
+    with _silence_fd(1):  # PyBullet's TinyRenderer banners
         try:
-            from . import pictures
-
-            with _silence_fd(1):
-                report["files"] += pictures.run_pictures(out, ex, estimate, res.truth, mesh, err)
+            files = write_result(res, mesh, out, opts["format"], pictures=pictures)
         except ImportError as exc:  # pragma: no cover - matplotlib missing
             log.warning("no pictures: %s", exc)
-    report["files"] = sorted(report["files"])
+            files = write_result(res, mesh, out, opts["format"], pictures=False)
+    report["files"] = sorted(files + ["report.json"])
     atomic_write_text(out / "report.json", _dump(report))
     if not args.quiet:
         print(f"{opts['object']}: {err.percent:.2f} % error, IoU {err.iou:.3f}, {ex.n_wraps} wraps, "

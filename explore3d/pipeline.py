@@ -45,6 +45,69 @@ class Result:
         """The reconstructed shape: shapely Polygon (planar) or closed trimesh (3D), world frame, metres."""
         return self.hull.shape()
 
+    def summary(self) -> dict:
+        """The figures of a run as a JSON-ready dict: :func:`exploration_summary`, ``n_points_used``,
+        ``percent_error``, ``iou``, ``chamfer_m``, ``hausdorff_m``, ``true_size``, ``estimate_size``
+        (m^2 planar, m^3 3D; ``size_unit``), ``centre_m`` and ``radius_m`` (the rough bound)."""
+        e = self.error
+        return {**exploration_summary(self.exploration), "n_points_used": self.n_points_used,
+                "percent_error": e.percent, "iou": e.iou, "chamfer_m": e.chamfer_m, "hausdorff_m": e.hausdorff_m,
+                "true_size": e.true_size, "estimate_size": e.estimate_size,
+                "size_unit": "m^2" if e.dim == 2 else "m^3",
+                "centre_m": [float(x) for x in self.centre], "radius_m": float(self.radius)}
+
+
+def exploration_summary(ex: Exploration) -> dict:
+    """``n_wraps``, ``n_points``, ``n_contacts``, ``wall_s``, ``sim_s`` and ``steps`` of an exploration."""
+    return {"n_wraps": ex.n_wraps, "n_points": int(len(ex.points)), "n_contacts": ex.n_contacts,
+            "wall_s": float(ex.wall_s), "sim_s": float(ex.sim_time_s), "steps": int(ex.steps)}
+
+
+def write_result(result: Result, mesh, out, fmt: str = "obj", pictures: bool = True) -> list[str]:
+    """Write a run's files into folder ``out`` (created) and return their names:
+
+    * ``estimate.<fmt>`` (obj, stl, ply, off, glb): the estimate mesh, world frame, metres; planar
+      runs: the polygon extruded over ``mesh``'s z range; ``estimate.urdf`` loading it in PyBullet
+      (plus ``estimate.obj`` when ``fmt`` is not obj/stl);
+    * ``estimate_polygon.json`` (planar): the polygon as a list of [x, y], metres, counter-clockwise;
+    * ``points.ply``: the link points with their wrap, attempt and link;
+    * ``figure.png``/``views.png``, ``overview.png``, ``scene.png`` with ``pictures=True``.
+
+    ``mesh`` is the explored object (closed trimesh, metres).  Files are written atomically.
+    """
+    import json
+    from pathlib import Path
+
+    import trimesh
+
+    from .export import check_format, write_estimate_urdf, write_mesh, write_points_ply
+    from .io import atomic_write_text
+
+    fmt = check_format(fmt)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    ex, estimate = result.exploration, result.estimate
+    write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
+    names = ["points.ply"]
+    if ex.config.mode == "planar":
+        ring = [[float(x), float(y)] for x, y in list(estimate.exterior.coords)[:-1]]
+        atomic_write_text(out / "estimate_polygon.json", json.dumps(ring, indent=2) + "\n")
+        names.append("estimate_polygon.json")
+        zlo, zhi = mesh.bounds[:, 2]
+        est_mesh = trimesh.creation.extrude_polygon(estimate, float(zhi - zlo))
+        est_mesh.apply_translation([0.0, 0.0, float(zlo)])
+    else:
+        est_mesh = estimate
+    mesh_name = f"estimate.{fmt}"
+    write_mesh(est_mesh, out / mesh_name, fmt)
+    write_estimate_urdf(mesh_name, out / "estimate.urdf", mesh=est_mesh)
+    names += [mesh_name, "estimate.urdf"] + ([] if fmt in ("obj", "stl") else ["estimate.obj"])  # PyBullet's copy
+    if pictures:
+        from . import pictures as pics
+
+        names += pics.run_pictures(out, ex, estimate, result.truth, mesh, result.error)
+    return sorted(names)
+
 
 class NoContactError(RuntimeError):
     """The exploration detected no contact at all.  ``exploration`` holds what was gathered
