@@ -1,5 +1,11 @@
 """explore3d.run (the pipeline): the robot's rough bound, no-contact and reconstruction failures
 without mocks, and the planar truth of multi-body meshes."""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 import trimesh
@@ -114,3 +120,66 @@ def test_planar_truth_keeps_cavities_and_single_bodies():
     assert planar_truth(cube, 0.01).equals(cross_section(cube, 0.01))  # one body: the section as it is
     with pytest.raises(ValueError, match="does not cut"):
         planar_truth(trimesh.util.concatenate([outer, inner]), 1.0)
+
+
+# --- scripts/explore_*.py (public API only) ---------------------------------------------------------
+
+SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+
+
+def _script(name, *args, cwd=None):
+    env = dict(os.environ, PYTHONPATH=str(SCRIPTS.parent))
+    return subprocess.run([sys.executable, str(SCRIPTS / name), *args], capture_output=True, text=True, env=env,
+                          timeout=120, cwd=cwd)
+
+
+SCRIPT_NAMES = ("explore_cube.py", "explore_cylinder.py", "explore_concave.py", "explore_mesh.py")
+
+
+def test_script_help():
+    """Each script's --help (in one interpreter, as ``python scripts/NAME --help`` runs it)."""
+    code = ("import runpy, sys\n"
+            f"sys.path.insert(0, {str(SCRIPTS)!r})\n"
+            f"for name in {SCRIPT_NAMES!r}:\n"
+            "    sys.argv = [name, '--help']\n"
+            "    try:\n"
+            f"        runpy.run_path({str(SCRIPTS)!r} + '/' + name, run_name='__main__')\n"
+            "    except SystemExit as e:\n"
+            "        print('exit', e.code)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                       env=dict(os.environ, PYTHONPATH=str(SCRIPTS.parent)))
+    assert r.returncode == 0, r.stderr
+    chunks = r.stdout.split("exit 0\n")
+    assert len(chunks) == len(SCRIPT_NAMES) + 1 and chunks[-1] == "", r.stdout
+    for name, text in zip(SCRIPT_NAMES, chunks):
+        assert text.startswith(f"usage: {name}") and "--quick" in text and "--out" in text, text
+
+
+def test_script_bad_input_is_one_line(tmp_path):
+    r = _script("explore_mesh.py", str(tmp_path / "missing.stl"), "--quick", "--out", str(tmp_path / "o"))
+    assert r.returncode == 1
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("explore_mesh: error: ") and "missing.stl" in lines[0], r.stderr
+
+
+def test_explore_cube_script_end_to_end(tmp_path):
+    """``explore_cube.py --quick --mode planar``: the printed figures are those of summary.json, which
+    are the error of the written polygon against the cube's section; the files it lists exist."""
+    from shapely.geometry import Polygon
+
+    from explore3d import shape_error
+
+    out = tmp_path / "cube"
+    r = _script("explore_cube.py", "--quick", "--mode", "planar", "--out", str(out), cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["object"] == "cube" and summary["quick"] and summary["n_wraps"] == 3
+    assert f"cube: {summary['percent_error']:.1f} % error, IoU {summary['iou']:.3f}" in r.stdout
+    assert sorted(summary["files"]) == sorted(f.name for f in out.iterdir())
+    assert {"estimate.obj", "estimate.urdf", "points.ply", "figure.png"} <= set(summary["files"])
+    poly = Polygon(json.loads((out / "estimate_polygon.json").read_text()))
+    err = shape_error(poly, cross_section(load_object("cube"), summary["centre_m"][2]))
+    assert summary["percent_error"] == pytest.approx(err.percent, rel=1e-12)
+    assert np.isfinite(err.percent) and err.percent > 0
+    est = trimesh.load(str(out / "estimate.obj"))
+    assert est.is_watertight and est.volume == pytest.approx(poly.area * 0.08, rel=1e-5)
