@@ -168,7 +168,10 @@ def _check_bool(v, name):
 
 def read_toml_config(path) -> dict:
     """Options for ``run`` from a TOML file (keys as in :data:`RUN_OPTIONS`, '-' or '_'), checked."""
-    import tomllib
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10 (pyproject allows it); tomllib is 3.11+
+        raise UsageError("--config needs Python 3.11 or newer (tomllib); pass the options as flags instead") from None
 
     path = Path(path)
     try:
@@ -458,7 +461,8 @@ def cmd_run(args) -> int:
     def fail(ex, msg: str) -> int:
         report.update(exploration_summary(ex))
         report["error"] = msg
-        write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
+        if len(ex.points):
+            write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
         atomic_write_text(out / "report.json", _dump(report))
         raise RunError(f"{msg} (report written to {out / 'report.json'})")
 

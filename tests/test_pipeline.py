@@ -35,20 +35,20 @@ def test_no_contact_is_real_and_named(case):
         run(mesh, TINY, PLANAR1, **kw)
     ex = info.value.exploration
     assert ex is not None and ex.n_contacts == 0 and ex.n_wraps == 1 and ex.steps > 0
-    assert len(ex.points) == TINY.n_links * PLANAR1.n_along  # the arm's final pose was still recorded
     msg = _one_line(str(info.value))
     for fix in ("arm", "size", "centre", "radius"):
         assert fix in msg
 
 
 def test_wrong_rough_bound_is_what_the_robot_uses():
-    """With the rough centre 1 m away the wrap is placed there: every link point is near it, none near the cube."""
+    """With the rough centre 1 m away the wrap is placed there: its base is outside the given radius
+    and within the arm's reach of the given centre, far from the cube (at the origin)."""
     c = np.array([1.0, 0.0, 0.0])
     with pytest.raises(NoContactError) as info:
         run(load_object("cube"), TINY, PLANAR1, centre=c, radius=0.06)
-    P = info.value.exploration.points
-    assert np.linalg.norm(P - c[:2], axis=1).max() < 0.06 + 0.01 + TINY.reach + TINY.link_width
-    assert np.linalg.norm(P, axis=1).min() > 0.5
+    base = info.value.exploration.poses[0].T_world_base[:3, 3]
+    assert 0.06 < np.linalg.norm(base - c) < 0.06 + TINY.reach
+    assert np.linalg.norm(base) > 1.0 - 0.06 - TINY.reach
 
 
 def test_points_not_around_the_centre_raise_reconstruction_error():
@@ -83,7 +83,7 @@ def test_run_positional_call_progress_and_result():
     P = res.exploration.points
     inside = np.linalg.norm(P - c[:2], axis=1) <= radius
     assert res.n_points_used == int(inside.sum()) == len(res.hull.points)
-    assert 0 < res.n_points_used < len(P)
+    assert 0 < res.n_points_used <= len(P)
     assert res.estimate.equals(res.hull.polygon)
     assert np.linalg.norm(np.asarray(res.estimate.exterior.coords) - c[:2], axis=1).max() <= radius
     assert np.isfinite(res.error.percent) and 0 < res.error.iou <= 1
