@@ -331,9 +331,9 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     assert report["config"]["explore"]["directions"] == 3
     assert report["config"]["arm"]["n_links"] == 8
     assert set(report["versions"]) >= {"explore3d", "numpy", "scipy", "trimesh", "pybullet", "shapely"}
-    for k in ("percent_error", "iou", "chamfer_m", "hausdorff_m", "true_size", "estimate_size", "wall_s",
-              "sim_s", "steps", "n_points"):
-        assert k in report
+    for k in ("object", "mode", "arm", "n_wraps", "n_points", "a", "method", "percent_error", "iou", "chamfer_m",
+              "hausdorff_m", "true_size", "estimate_size", "wall_s", "sim_s", "steps", "config", "versions"):
+        assert k in report, k
 
     # the reported error is the error of the written polygon against the section at the centre
     poly = Polygon(json.loads((out / "estimate_polygon.json").read_text()))
