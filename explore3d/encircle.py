@@ -14,6 +14,7 @@ PyBullet functions patched to raise).
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,6 +30,7 @@ class StopReason(enum.Enum):
     LIMIT = "limit"  #: the reference reached the joint limit without contact
     STOP_ANGLE = "stop_angle"  #: the base joint reached this attempt's stop angle (attempts after the first)
     TIMEOUT = "timeout"  #: the sweep ran out of steps
+    WRAPPED = "wrapped"  #: not swept: the chain before it had already curled a full turn (``max_curl``)
 
 
 @dataclass(frozen=True)
@@ -36,7 +38,11 @@ class ControlConfig:
     """Reference controller and contact detection (SI units).
 
     Attributes:
-        speed: reference speed of the swept joint, rad/s.
+        speed: largest reference speed of a swept joint, rad/s.
+        tip_speed: the swept joint's speed is also capped so the arm's tip moves at most this fast,
+            m/s: joint k sweeps at ``min(speed, tip_speed / L_k)`` with ``L_k`` the length from
+            joint k to the tip (proximal joints carry long chains: slower, gentler impacts).
+            None: every joint sweeps at ``speed``.
         ramp_time: time over which the swept joint's reference speed ramps up from 0, s.
         band_factor: the contact band is ``band_factor`` x the largest free-motion error ...
         band_margin: ... plus this, rad (covers solver noise the calibration did not see).
@@ -49,21 +55,32 @@ class ControlConfig:
         sweep_torque_margin: ... plus this, N m.  Held and distal joints keep the full motor
             torque, so a contact anywhere on the distal chain stalls the swept joint instead of
             knocking a held joint away.
+        watch_held: also watch the held (proximal) joints' errors; off, only the swept joint's
+            lag and the not-yet-swept (distal) joints' errors signal contact.
+        gravity_compensation: the motors cancel the links' weights (from the arm's own model and
+            the known base pose); the swept joint's torque limit then leaves gravity out.
+        max_curl: a joint is not swept once the joints before it have curled this much in
+            total, rad (2 pi: the chain has gone once around the object; beyond, it would lie
+            over itself).
         settle_steps: steps the arm is held still after being reset straight and after each
             sweep (lets the impact of a contact die out before the next joint moves).
         max_sweep_steps: safety cap on the steps of one joint's sweep.
     """
 
     speed: float = 3.0
+    tip_speed: float | None = 0.3
     ramp_time: float = 0.05
     band_factor: float = 1.5
-    band_margin: float = 0.01
+    band_margin: float = 0.02
     hold_bias: float = 0.0
     limit_margin: float = 0.02
     sweep_torque_factor: float = 1.5
     sweep_torque_margin: float = 0.05
     hold_torque_factor: float = 0.0
     other_margin: float = 0.05
+    watch_held: bool = False
+    gravity_compensation: bool = True
+    max_curl: float = 2 * math.pi
     settle_steps: int = 3
     max_sweep_steps: int = 2000
 
@@ -71,6 +88,8 @@ class ControlConfig:
         for name in ("speed", "band_factor"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0; got {getattr(self, name)}")
+        if self.tip_speed is not None and not self.tip_speed > 0:
+            raise ValueError(f"tip_speed must be > 0 m/s or None; got {self.tip_speed}")
         for name in ("ramp_time", "band_margin", "hold_bias", "limit_margin"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0; got {getattr(self, name)}")
@@ -115,16 +134,27 @@ class Attempt:
     trajectory_ref: np.ndarray | None = None
 
 
-def _ramp_speed(cfg: ControlConfig, t: float) -> float:
-    if cfg.ramp_time <= 0:
-        return cfg.speed
-    return cfg.speed * min(1.0, (t + 1e-12) / cfg.ramp_time)
+def sweep_speeds(spec: ArmSpec, cfg: ControlConfig) -> np.ndarray:
+    """(n,) sweep speed of each joint, rad/s (see :attr:`ControlConfig.tip_speed`)."""
+    w = np.full(spec.n_links, float(cfg.speed))
+    if cfg.tip_speed is not None:
+        reach = spec.link_length * (spec.n_links - np.arange(spec.n_links))
+        w = np.minimum(w, cfg.tip_speed / reach)
+    return w
+
+
+def _ramp_speed(speed: float, ramp_time: float, t: float) -> float:
+    if ramp_time <= 0:
+        return speed
+    return speed * min(1.0, (t + 1e-12) / ramp_time)
 
 
 def sweep_torque_limits(spec: ArmSpec, cfg: ControlConfig) -> np.ndarray:
     """(n,) motor torque limit, N m, of each joint while it sweeps (see :class:`ControlConfig`)."""
-    accel = cfg.speed / max(cfg.ramp_time, 1e-3)
-    need = np.array(spec.gravity_torques()) + np.array(spec.inertia_bounds()) * accel
+    accel = sweep_speeds(spec, cfg) / max(cfg.ramp_time, 1e-3)
+    need = np.array(spec.inertia_bounds()) * accel
+    if not cfg.gravity_compensation:
+        need = need + np.array(spec.gravity_torques())
     return cfg.sweep_torque_factor * need + cfg.sweep_torque_margin
 
 
@@ -147,9 +177,10 @@ def run_attempt(sim: ArmSimulation, T_world_base, band: ContactBand | None, cfg:
     sim.reset_joints(q_ref)
     q = q_ref.copy()
     for _ in range(cfg.settle_steps):
-        q = sim.step(q_ref)
+        q = sim.step(q_ref, gravity_compensation=cfg.gravity_compensation)
     upper = spec.joint_upper - cfg.limit_margin
     sweep_torques = sweep_torque_limits(spec, cfg)
+    speeds = sweep_speeds(spec, cfg)
     contact = np.zeros(n, dtype=bool)
     reasons: list = []
     detect_step = np.zeros(n, dtype=int)
@@ -158,6 +189,10 @@ def run_attempt(sim: ArmSimulation, T_world_base, band: ContactBand | None, cfg:
     for k in range(n):
         stop = upper if (k > 0 or base_stop is None) else min(upper, base_stop)
         reason = StopReason.TIMEOUT
+        if k > 0 and q[:k].sum() >= cfg.max_curl:
+            reasons.extend([StopReason.WRAPPED] * (n - k))
+            detect_step[k:] = steps
+            break
         if q_ref[k] >= stop:
             reason = StopReason.STOP_ANGLE if (k == 0 and base_stop is not None) else StopReason.LIMIT
         else:
@@ -169,11 +204,13 @@ def run_attempt(sim: ArmSimulation, T_world_base, band: ContactBand | None, cfg:
             prev_lag, prev_sig = 0.0, np.zeros(n)
             for i in range(cfg.max_sweep_steps):
                 # speed ramps up from rest and down again before the stop angle (no false alarm there)
-                w = min(_ramp_speed(cfg, i * dt), _ramp_speed(cfg, max(0.0, (stop - q_ref[k]) / cfg.speed)))
-                w = max(w, cfg.speed * 0.05)
+                wk = speeds[k]
+                w = min(_ramp_speed(wk, cfg.ramp_time, i * dt),
+                        _ramp_speed(wk, cfg.ramp_time, max(0.0, (stop - q_ref[k]) / wk)))
+                w = max(w, wk * 0.05)
                 q_ref[k] = min(stop, q_ref[k] + w * dt)
                 dq_ref[k] = w if q_ref[k] < stop else 0.0
-                q = sim.step(q_ref, dq_ref, forces)
+                q = sim.step(q_ref, dq_ref, forces, gravity_compensation=cfg.gravity_compensation)
                 steps += 1
                 if record:
                     traj.append(q)
@@ -183,6 +220,8 @@ def run_attempt(sim: ArmSimulation, T_world_base, band: ContactBand | None, cfg:
                 lag = (q_ref[k] - w * dt) - q[k]
                 sig = (q_ref - q) - base_err
                 sig[k] = 0.0
+                if not cfg.watch_held:
+                    sig[:k] = 0.0
                 # Mean of this and the previous step: a two-step chatter of a loaded joint cancels,
                 # a contact (a persistent error) does not.
                 lag2, sig2 = 0.5 * (lag + prev_lag), 0.5 * (sig + prev_sig)
@@ -199,7 +238,7 @@ def run_attempt(sim: ArmSimulation, T_world_base, band: ContactBand | None, cfg:
             contact[k] = True
             q_ref[k] = q[k] + cfg.hold_bias
         for _ in range(cfg.settle_steps):
-            q = sim.step(q_ref)
+            q = sim.step(q_ref, gravity_compensation=cfg.gravity_compensation)
             steps += 1
         reasons.append(reason)
         detect_step[k] = steps

@@ -93,7 +93,11 @@ class Exploration:
         config: the configuration.
         poses: the wraps' base poses.
         attempts: per wrap, its attempts.
-        points: (m, d) link surface points, world frame, metres (d = 2 planar, 3 in 3d).
+        points: (m, d) link surface points at final contact, world frame, metres (d = 2 planar, 3
+            in 3d), of the links whose own joint's sweep ended in a detected contact (the link
+            or one beyond it touched).  Links that swung freely to their joint limit, or were
+            not swept because the chain had already curled a full turn, are left out: they touch
+            nothing (their poses are in ``attempts``).
         point_wrap, point_attempt, point_link: (m,) int: where each point came from.
         band: the calibrated contact band.
         steps: physics steps taken (all wraps).
@@ -221,12 +225,13 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
     pts, pw, pa, pl = [], [], [], []
     for wi, atts in enumerate(attempts):
         for ai, att in enumerate(atts):
-            P = attempt_points(spec, att, config)
+            links = np.nonzero(att.contact)[0]
+            P = attempt_points(spec, att, config)[links]
             k = P.shape[1]
             pts.append(P.reshape(-1, P.shape[-1]))
             pw.append(np.full(P.shape[0] * k, wi))
             pa.append(np.full(P.shape[0] * k, ai))
-            pl.append(np.repeat(np.arange(P.shape[0]), k))
+            pl.append(np.repeat(links, k))
     return Exploration(
         spec=spec, config=config, poses=tuple(poses), attempts=attempts, points=np.concatenate(pts),
         point_wrap=np.concatenate(pw), point_attempt=np.concatenate(pa), point_link=np.concatenate(pl),

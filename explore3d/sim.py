@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arm import ArmSpec, arm_urdf
+from .kinematics import link_transforms
 
 
 @dataclass(frozen=True)
@@ -110,10 +111,12 @@ class ArmSimulation:
         for j in [-1] + self.joints:
             p.changeDynamics(self.arm, j, lateralFriction=config.friction, restitution=0.0)
         self._pc = pybullet.POSITION_CONTROL
+        self._world_frame = pybullet.WORLD_FRAME
         self.steps = 0
         self._q_ref = np.zeros(spec.n_links)
         self._dq_ref = np.zeros(spec.n_links)
         self._forces = np.array(self.torques)
+        self._T_base = np.eye(4)
         self._state = p.saveState()
 
     # --- what the exploration may call -------------------------------------------------------
@@ -121,6 +124,7 @@ class ArmSimulation:
         """Put the arm's base at the known pose ``T_world_base`` (4, 4) and restore the initial
         physics state, so every wrap starts from the same state whatever ran before."""
         self._p.restoreState(self._state)
+        self._T_base = np.asarray(T_world_base, dtype=np.float64).copy()
         pos, quat = _pose_from_T(T_world_base)
         self._p.resetBasePositionAndOrientation(self.arm, pos, quat)
 
@@ -143,11 +147,28 @@ class ArmSimulation:
             positionGains=[c.position_gain] * n, velocityGains=[c.velocity_gain] * n,
         )
 
-    def step(self, q_ref, dq_ref=None, forces=None) -> np.ndarray:
+    def _compensate_gravity(self) -> None:
+        # Joint torques that cancel the links' weights, tau = sum_i J_i^T (-m_i g), are exactly
+        # the generalised force of an upward force m_i g at each link's centre of mass; PyBullet's
+        # position motors take no feed-forward torque, so the motors' compensation is applied in
+        # that equivalent form.  Computed from the robot's own model: measured joint angles, the
+        # known base pose, link masses and the gravity vector.
+        q = self.joint_angles()
+        T = link_transforms(self.spec, q, self._T_base)
+        com = T[:, :3, 3] + T[:, :3, 0] * (self.spec.link_length / 2.0)
+        f = (-self.spec.link_mass * np.asarray(self.config.gravity, dtype=np.float64)).tolist()
+        for j, c in zip(self.joints, com.tolist()):
+            self._p.applyExternalForce(self.arm, j, f, c, self._world_frame)
+
+    def step(self, q_ref, dq_ref=None, forces=None, gravity_compensation: bool = False) -> np.ndarray:
         """Command references ``q_ref`` (n,), rad, optionally velocity references ``dq_ref`` (n,),
         rad/s (default 0), and motor torque limits ``forces`` (n,), N m (default: the arm's
         :meth:`~explore3d.arm.ArmSpec.joint_torques`, clipped to them); advance one timestep;
-        return the measured joint angles (n,), rad."""
+        return the measured joint angles (n,), rad.
+
+        ``gravity_compensation``: the motors also cancel the links' weights (computed from the
+        robot's own model, see :meth:`_compensate_gravity`), so the position loop sees no
+        gravity load in any orientation of the arm's plane."""
         n = len(self.joints)
         dq = np.zeros(n) if dq_ref is None else dq_ref
         f = self.torques if forces is None else np.minimum(forces, self.torques)
@@ -157,6 +178,8 @@ class ArmSimulation:
             self._dq_ref = np.array(dq, dtype=np.float64)
             self._forces = np.array(f, dtype=np.float64)
             self._send()
+        if gravity_compensation:
+            self._compensate_gravity()
         self._p.stepSimulation()
         self.steps += 1
         return self.joint_angles()
