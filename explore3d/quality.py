@@ -346,13 +346,14 @@ class DetectionRecord:
         return asdict(self)
 
 
-def _trigger(att, band, k: int, s: int, e: int, base_err=None) -> tuple[int, float]:
+def _trigger(att, band, k: int, s: int, e: int, base_err=None, watch_held: bool = True) -> tuple[int, float]:
     """Recompute the detection signals of :func:`explore3d.encircle.run_attempt` at row e of
     sweep k (rows s..e) from the recorded trajectory; return (joint, signal / band).
 
     ``base_err`` (n,) is the joint error q_ref - q just before the sweep (rad); the recording
     does not hold it (settle steps are not recorded), so by default the first sweep row's error
-    stands in for it (:func:`replay_wrap` gives the exact one)."""
+    stands in for it (:func:`replay_wrap` gives the exact one).  ``watch_held``: the controller
+    also watches the held joints (``ControlConfig.watch_held``; older controllers always did)."""
     Q, R = att.trajectory, att.trajectory_ref
     if e - s < 1:
         return -1, 0.0
@@ -364,6 +365,8 @@ def _trigger(att, band, k: int, s: int, e: int, base_err=None) -> tuple[int, flo
         lag = (R[t, k] - wdt) - Q[t, k]
         sig = (R[t] - Q[t]) - base_err
         sig[k] = 0.0
+        if not watch_held:
+            sig[:k] = 0.0
         ratios.append((lag, sig))
     lag2 = 0.5 * (ratios[0][0] + ratios[1][0])
     sig2 = 0.5 * (ratios[0][1] + ratios[1][1])
@@ -401,6 +404,7 @@ def detection_records(exploration, mesh, touch_tol_m: float = TOUCH_TOL_M, cutof
     """
     sdf = _as_sdf(mesh)
     spec = exploration.spec
+    watch_held = bool(getattr(exploration.config.control, "watch_held", True))
     out = []
     for wi in (range(exploration.n_wraps) if wraps is None else wraps):
         atts = exploration.attempts[wi]
@@ -427,7 +431,7 @@ def detection_records(exploration, mesh, touch_tol_m: float = TOUCH_TOL_M, cutof
                 chain = dist[i, k:]
                 touch = _first_touch(spec, att, sdf, k, s, e, touch_tol_m)
                 b = base[ai].get(k) if base is not None else None
-                trig, ratio = _trigger(att, exploration.band, k, s, e, b)
+                trig, ratio = _trigger(att, exploration.band, k, s, e, b, watch_held)
                 out.append(DetectionRecord(
                     wrap=wi, attempt=ai, joint=k, detect_row=e, chain_distance_m=float(chain.min()),
                     arm_distance_m=float(dist[i].min()), nearest_link=int(k + np.argmin(chain)),
@@ -451,12 +455,17 @@ def _check_final(spec: ArmSpec, q, T_world_base, contact):
     return q, T, contact
 
 
-def contact_links(spec: ArmSpec, q, T_world_base, contact, sdf, cutoff_m: float = 0.005) -> tuple[np.ndarray, np.ndarray]:
+def contact_links(spec: ArmSpec, q, T_world_base, contact, sdf,
+                  touch_m: float = FALSE_DETECTION_TOL_M) -> tuple[np.ndarray, np.ndarray]:
     """The link in contact behind every contact-flagged joint of final configurations.
 
-    Joint k's contact means something on links k..n-1 touches; the touching link is taken to be
-    the one of those whose box is nearest the surface (:func:`box_min_distance`, resolved
-    finely up to ``cutoff_m``).
+    Joint k's contact means something on links k..n-1 touches.  The contact link is the most
+    proximal of those that is within ``touch_m`` of the surface and nearer than its neighbours
+    in k..n-1 (a local minimum of the distance along the chain: one link per place where the
+    chain meets the object, not a neighbour that is merely close to it); if there is none, the
+    nearest of k..n-1 (the flag was a false detection).  Taking the most proximal contact rather
+    than the nearest link keeps the contacts of a wrap apart instead of always picking whichever
+    link of the wrap happens to be a few micrometres closer.
 
     Args:
         spec: the arm.
@@ -464,6 +473,7 @@ def contact_links(spec: ArmSpec, q, T_world_base, contact, sdf, cutoff_m: float 
         T_world_base: (m, 4, 4) base poses, world frame (or one (4, 4) for all).
         contact: (m, n) bool, the contact flags.
         sdf: :class:`SignedDistance` (or mesh, or callable (..., 3) -> (...) metres) of the object.
+        touch_m: metres.
 
     Returns:
         row: (c,) int, the configuration (row of ``q``) of each flagged joint, in row-major order.
@@ -472,11 +482,18 @@ def contact_links(spec: ArmSpec, q, T_world_base, contact, sdf, cutoff_m: float 
     q, T, contact = _check_final(spec, q, T_world_base, contact)
     sdf = _as_sdf(sdf)
     Tl = np.einsum("mij,mnjk->mnik", T, link_transforms(spec, q))  # (m, n, 4, 4)
-    dist, _, _ = box_min_distance(spec, Tl.reshape(-1, 4, 4), sdf, cutoff_m=cutoff_m)
+    dist, _, _ = box_min_distance(spec, Tl.reshape(-1, 4, 4), sdf, cutoff_m=touch_m,
+                                  pitches_m=(5.0e-3, TRAJECTORY_PITCH_M, DETECTION_CONFIG_PITCH_M), decide_only=True)
     dist = dist.reshape(q.shape)
     rows, ks = np.nonzero(contact)
-    links = np.array([int(k + np.argmin(dist[i, k:])) for i, k in zip(rows, ks)], dtype=int)
-    return rows.astype(int), links
+    links = []
+    for i, k in zip(rows, ks):
+        d = dist[i, k:]
+        prev = np.concatenate([[np.inf], d[:-1]])
+        nxt = np.concatenate([d[1:], [np.inf]])
+        near = np.flatnonzero((d <= touch_m) & (d <= prev) & (d <= nxt))
+        links.append(int(k + (near[0] if near.size else np.argmin(d))))
+    return rows.astype(int), np.array(links, dtype=int)
 
 
 def contact_gaps(spec: ArmSpec, q, T_world_base, contact, sdf, face: str = "inner",

@@ -216,31 +216,36 @@ def test_quality_needs_recorded_trajectories():
         contact_quality(ex, cube)
 
 
+#: Upper bounds per run, set from measurements on 2026-11-25 with the controller of commit 23800cb
+#: (gravity compensation, tip-speed-capped sweeps, distal-only joint watch): measured false
+#: fraction 0.087 planar / 0.022 3D, held knock-off 0.105 / 0.098 rad, distal knock-off 0.110 /
+#: 0.079 rad, longest touch-to-detection delay 1.26 / 1.30 s (a link pivoting on a cube corner).
+BOUNDS = {
+    "planar_run": dict(false_fraction=0.15, knock_off_held_max_rad=0.15, knock_off_distal_max_rad=0.15),
+    "spatial_run": dict(false_fraction=0.06, knock_off_held_max_rad=0.15, knock_off_distal_max_rad=0.15),
+}
+
+
 @pytest.mark.parametrize("run", ["planar_run", "spatial_run"])
 def test_contact_quality_of_the_default_arm_on_the_cube(run, request):
-    """Bounds from measurements on 2026-11-25 (planar 3 directions, 1 attempt / 3D 4 wraps).
-    They describe the controller as it is, including what is bad: about half of all detections
-    are false (see BENCHMARKS.md for the cause: held proximal joints knocked off their references,
-    saturated, and chattering against the object)."""
+    """The contact quality of the default arm (planar 3 directions x 1 attempt; 3D 4 wraps)."""
     _, ex, q = request.getfixturevalue(run)
     assert q.n_detections == ex.n_contacts > 0
-    assert q.n_false + (q.n_detections - q.n_false) == q.n_detections
-    # no link geometry inside the cube at the end (measured 0.0 m; PyBullet's 1 mm margin)
+    # no link geometry inside the cube (measured 0.0 m: PyBullet's 1 mm mesh margin holds it off)
     assert q.penetration_max_m < 1e-3 and q.penetration_trajectory_max_m < 1e-3
-    # touching inner faces sit at the mesh margin: measured 0.95 mm planar, 0.65 mm 3D
-    assert 0.3e-3 < q.gap_true_median_m < 1.5e-3
-    assert q.gap_true_p90_m < 2e-3
-    # every detection with a false flag is farther than the tolerance, the others within it
+    # touching inner faces sit at the 1 mm mesh margin: measured median 1.00 mm planar, 0.93 mm 3D;
+    # p90 1.07 / 1.59 mm
+    assert 0.5e-3 < q.gap_true_median_m < 1.3e-3
+    assert q.gap_true_p90_m < 2.0e-3
+    # false detections are farther than the tolerance by definition; the others within it
     assert q.n_false == 0 or q.false_distance_median_m > FALSE_DETECTION_TOL_M
-    # measured false fractions 0.54-0.60 planar, 0.44 3D: bad (target: below 0.1)
-    assert q.false_fraction < 0.7
+    assert q.false_fraction < BOUNDS[run]["false_fraction"]
     # the whole arm is never away from the cube at a detection (held links stay in contact)
     assert q.free_space_fraction < 0.05
-    # detection delay after the moving chain touches: measured median 0.025-0.05 s, max 0.22 s
-    assert q.n_delays > 0 and q.delay_median_s < 0.1 and q.delay_max_s < 0.5
-    # knock-off: held joints pushed 0.29-0.31 rad off their references (measured; bad)
-    assert q.knock_off_held_max_rad < 0.4
-    assert q.knock_off_distal_max_rad < 0.25
+    # touch-to-detection delay: measured median 0.05 s
+    assert q.n_delays > 0 and q.delay_median_s < 0.1 and q.delay_max_s < 2.0
+    assert q.knock_off_held_max_rad < BOUNDS[run]["knock_off_held_max_rad"]
+    assert q.knock_off_distal_max_rad < BOUNDS[run]["knock_off_distal_max_rad"]
 
 
 def test_false_detections_are_distal_and_never_touched(planar_run):
