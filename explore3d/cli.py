@@ -154,7 +154,7 @@ RUN_OPTIONS = {
     "radius": _positive("--radius"),
     "no_pictures": None,  # bool
 }
-RUN_DEFAULTS = {"object": "cube", "arm": "default", "mode": "3d", "a": 0.2, "method": "exponential", "seed": 0,
+RUN_DEFAULTS = {"object": "cube", "arm": "default", "mode": "3d", "a": 0.05, "method": "exponential", "seed": 0,
                 "format": "obj"}
 _EXPLORE_KEYS = ("mode", "directions", "attempts", "jobs", "offsets", "angles", "mirrored", "base_step",
                  "clearance", "n_along", "n_height")
@@ -222,10 +222,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--attempts", type=RUN_OPTIONS["attempts"], help="attempts per wrap")
     r.add_argument("--offsets", type=RUN_OPTIONS["offsets"], help="3d: planes per normal")
     r.add_argument("--angles", type=RUN_OPTIONS["angles"], help="3d: approach angles per plane")
-    r.add_argument("--a", type=RUN_OPTIONS["a"], help="inverse-hull coarseness > 0 (default 0.2)")
+    r.add_argument("--a", type=RUN_OPTIONS["a"], help="inverse-hull coarseness > 0 (default 0.05, as explore3d.run)")
     r.add_argument("--method", type=RUN_OPTIONS["method"], help="exponential (default) or spherical")
     r.add_argument("--seed", type=RUN_OPTIONS["seed"], help="seed of the error-measure surface samples (default 0)")
-    r.add_argument("--jobs", type=RUN_OPTIONS["jobs"], help="worker processes >= 1 (default 1)")
+    r.add_argument("--jobs", type=RUN_OPTIONS["jobs"], help="worker processes >= 1 (default: all cores; results do not depend on it)")
     r.add_argument("--config", help="TOML file with the same option names (object, out, arm, mode, ...)")
     r.add_argument("--format", type=RUN_OPTIONS["format"], help=f"estimate mesh format: {', '.join(MESH_FORMATS)} (default obj)")
     g = r.add_mutually_exclusive_group()
@@ -271,6 +271,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--json", action="store_true", help="print JSON")
     t.add_argument("--a", type=RUN_OPTIONS["a"], help="inverse-hull coarseness > 0 (default: table1_rows' own, 0.2)")
     t.add_argument("--seed", type=RUN_OPTIONS["seed"], help="seed of the simulated many-links case")
+    t.add_argument("--3d", dest="three_d", action="store_true",
+                   help="also the default arm's 3D volume errors on the cube, cylinder and sphere, with and "
+                        "without the contact thickness calibrated on a 60 mm ball (several minutes)")
+    t.add_argument("--jobs", type=RUN_OPTIONS["jobs"], help="worker processes for --3d (default: all cores)")
     t.set_defaults(func=cmd_table1)
 
     a = sub.add_parser("arm", help="write an arm URDF",
@@ -324,6 +328,7 @@ def explore_config(opts: dict):
     from .explore import ExploreConfig
 
     kw = {k: opts[k] for k in _EXPLORE_KEYS if k in opts}
+    kw.setdefault("jobs", None)  # the command line spreads wraps over all cores unless told
     try:
         return ExploreConfig(**kw)
     except (TypeError, ValueError) as exc:
@@ -615,11 +620,15 @@ def cmd_table1(args) -> int:
         raise RunError(f"explore3d.table1 is not available ({exc}); update explore3d") from None
     kw = {k: getattr(args, k) for k in ("a", "seed") if getattr(args, k) is not None}
     rows = table1.table1_rows(**kw)
+    rows3d = table1.table3d_rows(jobs=args.jobs) if args.three_d else None
     if args.json:
-        print(_dump(rows), end="")
+        print(_dump(rows if rows3d is None else {"table1": rows, "table3d": rows3d}), end="")
         return 0
     if hasattr(table1, "format_table"):
         print(table1.format_table(rows))
+        if rows3d is not None:
+            print()
+            print(table1.format_table3d(rows3d))
         return 0
     print(f"{'case':<24} {'paper m^2':>12} {'paper %':>8} {'ours m^2':>12} {'ours %':>8}")
     for r in rows:

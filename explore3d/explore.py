@@ -35,8 +35,12 @@ class ExploreConfig:
             or "3d" (wrap planes spread over the sphere, 3D result).
         directions: planar: number of approach directions (90 degrees apart; with
             ``mirrored`` and 2, the paper's mirrored pair).  3d: number of plane normals.
+            None (default): 3 planar (the paper's recommendation), 48 in 3d.
         mirrored: planar only: the second direction is the mirror image of the first.
-        offsets: 3d: planes per normal, at offsets along it.
+        offsets: 3d: planes per normal, at offsets along it (1: every plane through the rough
+            centre; measured on the 80 mm cube, planes offset by 0.7 x the bounding radius cut
+            only small corner sections the arm cannot follow, 25% volume error against 15% for
+            the same number of wraps through the centre).
         angles: 3d: approach angles per plane.
         attempts: attempts per wrap (the base joint stops ``base_step`` short each time).
         base_step: rad.
@@ -52,9 +56,9 @@ class ExploreConfig:
     """
 
     mode: str = "3d"
-    directions: int = 12
+    directions: int | None = None
     mirrored: bool = False
-    offsets: int = 2
+    offsets: int = 1
     angles: int = 2
     attempts: int = 1
     base_step: float = 0.1
@@ -71,6 +75,8 @@ class ExploreConfig:
     def __post_init__(self):
         if self.mode not in ("planar", "3d"):
             raise ValueError(f"mode must be 'planar' or '3d'; got {self.mode!r}")
+        if self.directions is None:
+            object.__setattr__(self, "directions", 3 if self.mode == "planar" else 48)
         for name in ("directions", "offsets", "angles", "attempts", "n_along", "n_height"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:

@@ -100,7 +100,13 @@ def test_flags_into_explore_config():
     assert isinstance(cfg, ExploreConfig)
     assert (cfg.mode, cfg.directions, cfg.attempts) == ("planar", 2, 3)
     assert cfg.offsets == ExploreConfig().offsets  # unset: the dataclass default
-    assert (opts["object"], opts["a"], opts["format"]) == ("cube", 0.2, "obj")
+    import inspect
+
+    from explore3d.pipeline import run as api_run
+
+    # the command line's default coarseness is the API's
+    assert (opts["object"], opts["a"], opts["format"]) == ("cube", inspect.signature(api_run).parameters["a"].default, "obj")
+    assert cfg.jobs is None  # all cores unless told
 
 
 def test_toml_config_and_flag_override(tmp_path):
