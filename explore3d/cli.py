@@ -70,6 +70,16 @@ def _positive(name):
     return f
 
 
+def _nonnegative(name):
+    def f(text):
+        v = _number(text, name)
+        if not v >= 0:
+            raise UsageError(f"{name} must be >= 0; got {text!r}")
+        return v
+    f.__name__ = name
+    return f
+
+
 def _int_min(name, lo=1):
     def f(text):
         if isinstance(text, bool) or isinstance(text, float):
@@ -153,11 +163,14 @@ RUN_OPTIONS = {
     "centre": _point3,
     "radius": _positive("--radius"),
     "no_pictures": None,  # bool
+    # contact thickness: a known calibration (metres) or calibrate now on the 60 mm ball
+    "face_offset": _nonnegative("--face-offset"),
+    "calibrate": None,  # bool
 }
 RUN_DEFAULTS = {"object": "cube", "arm": "default", "mode": "3d", "a": 0.05, "method": "exponential", "seed": 0,
                 "format": "obj"}
 _EXPLORE_KEYS = ("mode", "directions", "attempts", "jobs", "offsets", "angles", "mirrored", "base_step",
-                 "clearance", "n_along", "n_height")
+                 "clearance", "n_along", "n_height", "face_offset")
 
 
 def _check_bool(v, name):
@@ -188,7 +201,7 @@ def read_toml_config(path) -> dict:
         if key not in RUN_OPTIONS:
             raise UsageError(f"unknown key {k!r} in config {path}; valid keys: {', '.join(sorted(RUN_OPTIONS))}")
         check = RUN_OPTIONS[key]
-        if key in ("mirrored", "no_pictures"):
+        if key in ("mirrored", "no_pictures", "calibrate"):
             out[key] = _check_bool(v, key)
         elif check is str:
             if not isinstance(v, str):
@@ -238,6 +251,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "vertex distance from the centre); contact points beyond it are dropped")
     r.add_argument("--no-pictures", dest="no_pictures", action="store_true", default=None,
                    help="skip the PNG pictures (faster)")
+    t_ = r.add_mutually_exclusive_group()
+    t_.add_argument("--face-offset", dest="face_offset", type=RUN_OPTIONS["face_offset"],
+                    help="calibrated contact thickness, metres: link faces are pushed this far towards the "
+                         "object (default 0)")
+    t_.add_argument("--calibrate", dest="calibrate", action="store_true", default=None,
+                    help="first calibrate the contact thickness on a known 60 mm ball (never the object under "
+                         "test) with the same settings, then use it (about doubles the run time)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     r.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
     r.set_defaults(func=cmd_run)
@@ -470,6 +490,20 @@ def cmd_run(args) -> int:
             write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
         atomic_write_text(out / "report.json", _dump(report))
         raise RunError(f"{msg} (report written to {out / 'report.json'})")
+
+    if opts.get("calibrate"):
+        import dataclasses
+
+        from .calibration import calibrate_thickness
+
+        if "face_offset" in opts:
+            raise UsageError("--calibrate and --face-offset exclude each other: pass one")
+        with _silence_fd(1):
+            cal = calibrate_thickness(spec, config)
+        config = dataclasses.replace(config, face_offset=cal.face_offset_m)
+        report["calibration"] = cal.to_dict()
+        report["config"]["explore"] = config.to_dict()
+        log.info("calibrated contact thickness %.3g m", cal.face_offset_m)
 
     try:
         with _silence_fd(1):  # PyBullet's solver banners; progress goes to stderr

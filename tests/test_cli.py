@@ -496,3 +496,27 @@ def test_module_entry_point_usage_error(tmp_path):
     r = _python("-m", "explore3d", "run", "cube", "--out", str(tmp_path / "o"), "--a", "0")
     assert r.returncode == 2
     assert_one_line_error(r.stderr, "> 0")
+
+
+def test_run_calibrate_applies_the_ball_calibration(tmp_path, capsys, small_arm):
+    """--calibrate measures the contact thickness on the known ball with the same settings and
+    runs with it: the report carries the calibration and the offset actually used; the estimate
+    shrinks against the uncalibrated run of the same joint angles."""
+    common = ["run", "cube", "--arm", str(small_arm), "--mode", "planar", "--directions", "3", "--attempts", "1",
+              "--no-pictures", "-q", "--jobs", "1"]
+    assert run(capsys, *common, "--out", str(tmp_path / "raw"))[0] == 0
+    code, _, err = run(capsys, *common, "--out", str(tmp_path / "cal"), "--calibrate")
+    assert code == 0, err
+    raw = json.loads((tmp_path / "raw" / "report.json").read_text())
+    cal = json.loads((tmp_path / "cal" / "report.json").read_text())
+    off = cal["calibration"]["face_offset_m"]
+    assert 0 < off < 0.002 and cal["calibration"]["n_points"] > 0
+    assert cal["config"]["explore"]["face_offset"] == off and raw["config"]["explore"]["face_offset"] == 0.0
+    assert cal["n_contacts"] == raw["n_contacts"]  # the offset moves points, not the arm
+    assert cal["estimate_size"] < raw["estimate_size"]
+
+
+def test_run_calibrate_and_face_offset_exclude_each_other(tmp_path, capsys):
+    code, _, err = run(capsys, "run", "cube", "--out", str(tmp_path / "o"), "--calibrate", "--face-offset", "0.001")
+    assert code == 2
+    assert_one_line_error(err, "--calibrate")
