@@ -53,7 +53,8 @@ def bench_wrap(spec, attempts=1, repeats=5):
         sim.set_base = recording_set_base
         run_wrap(sim, pose.T_world_base, band, attempts=attempts, cfg=ctl)
         sim.step, sim.set_base = orig, orig_set_base
-        p, arm, joints, pc = sim.client, sim.arm, sim.joints, sim._pc
+        # the raw pybullet functions bound to the client: the cheapest way to issue the same calls
+        motor, step, arm, joints, pc = sim._motor_array, sim._step_sim, sim.arm, sim.joints, sim._pc
         n = len(joints)
         kp, kd = [sim.config.position_gain] * n, [sim.config.velocity_gain] * n
         t0 = time.perf_counter()
@@ -61,9 +62,9 @@ def bench_wrap(spec, attempts=1, repeats=5):
             if i in starts:
                 sim.set_base(pose.T_world_base)
                 sim.reset_joints(np.zeros(n))
-            p.setJointMotorControlArray(arm, joints, pc, targetPositions=q, targetVelocities=dq, forces=f,
-                                        positionGains=kp, velocityGains=kd)
-            p.stepSimulation()
+            motor(arm, joints, pc, targetPositions=q, targetVelocities=dq, forces=f, positionGains=kp,
+                  velocityGains=kd)
+            step()
         bare = len(cmds) / (time.perf_counter() - t0)
     wall = float(np.median(walls))
     sps = steps[0] / wall
