@@ -59,6 +59,8 @@ class ControlConfig:
             lag and the not-yet-swept (distal) joints' errors signal contact.
         gravity_compensation: the motors cancel the links' weights (from the arm's own model and
             the known base pose); the swept joint's torque limit then leaves gravity out.
+        rereference_held: after each detection the held joints' references are reset to their
+            measured angles (no held joint stays saturated against the object).
         max_curl: a joint is not swept once the joints before it have curled this much in
             total, rad (2 pi: the chain has gone once around the object; beyond, it would lie
             over itself).
@@ -80,6 +82,7 @@ class ControlConfig:
     other_margin: float = 0.05
     watch_held: bool = False
     gravity_compensation: bool = True
+    rereference_held: bool = False
     max_curl: float = 2 * math.pi
     settle_steps: int = 3
     max_sweep_steps: int = 2000
@@ -237,6 +240,8 @@ def run_attempt(sim: ArmSimulation, T_world_base, band: ContactBand | None, cfg:
         if reason is StopReason.CONTACT:
             contact[k] = True
             q_ref[k] = q[k] + cfg.hold_bias
+            if cfg.rereference_held:
+                q_ref[:k] = q[:k] + cfg.hold_bias * contact[:k]
         for _ in range(cfg.settle_steps):
             q = sim.step(q_ref, gravity_compensation=cfg.gravity_compensation)
             steps += 1
