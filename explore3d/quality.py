@@ -12,8 +12,9 @@ link's box surface, sampled on a grid of a given pitch.  The signed distance is 
 a sampled minimum overestimates the true one by at most the grid's covering radius (the largest
 distance of a surface point from its nearest sample); :func:`box_min_distance` uses that bound to
 prune links far from the surface coarse-to-fine, so only links near the surface are sampled
-finely.  Penetration depth is the largest negative signed distance over the same samples (exact
-for depths up to W/2, where the deepest point of the box lies on its surface).
+finely.  Penetration depth is the largest negative signed distance over the same samples: the
+deepest point of a box pressed into a flat face lies on the box surface, so for the shallow
+penetrations met here this is the box's penetration; in general it is a lower bound.
 
 Why links touching the object sit ~1 mm off its surface: PyBullet gives the static concave
 triangle mesh a 1 mm collision margin (measured: ``getClosestPoints`` between a link face and the
@@ -615,8 +616,8 @@ class ContactQuality:
         penetration_trajectory_max_m: the deepest penetration along the recorded trajectories
             (every ``trajectory_stride``-th step).
         gap_median_m, gap_p90_m: signed distance of the inner face of the contact link (the
-            nearest of the swept link and its distal links) at the final configuration, over
-            all detections.
+            most proximal touching link among the swept link and its distal links, see
+            :func:`contact_links`) at the final configuration, over all detections.
         gap_true_median_m, gap_true_p90_m: the same over the detections that are not false.
         face_offset_m: the exploration's ``face_offset`` (it moves the points, not the links).
         point_gap_median_m, point_gap_p90_m: the smallest signed distance of the contact link's
