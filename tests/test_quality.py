@@ -220,9 +220,13 @@ def test_quality_needs_recorded_trajectories():
 #: (gravity compensation, tip-speed-capped sweeps, distal-only joint watch): measured false
 #: fraction 0.087 planar / 0.022 3D, held knock-off 0.105 / 0.098 rad, distal knock-off 0.110 /
 #: 0.079 rad, longest touch-to-detection delay 1.26 / 1.30 s (a link pivoting on a cube corner).
+#: The 3D bounds cover the spread over wrap sets, not one sample: the same 3D runs with 3, 5, 6, 7
+#: and 8 plane normals (commit 9cfefab + the 3-ray sign test) gave false fractions 0.000-0.056,
+#: held knock-off 0.068-0.156 rad, distal 0.036-0.130 rad; a different floating-point rounding
+#: (another CPU) draws another sample from that spread.
 BOUNDS = {
     "planar_run": dict(false_fraction=0.15, knock_off_held_max_rad=0.15, knock_off_distal_max_rad=0.15),
-    "spatial_run": dict(false_fraction=0.06, knock_off_held_max_rad=0.15, knock_off_distal_max_rad=0.15),
+    "spatial_run": dict(false_fraction=0.08, knock_off_held_max_rad=0.2, knock_off_distal_max_rad=0.2),
 }
 
 
@@ -271,3 +275,14 @@ def test_replay_is_identical_and_reproduces_the_detections(planar_run):
     assert recs and all(r.trigger >= 0 and r.trigger_ratio >= 1.0 for r in recs)
     # the log holds the recorded sweep steps plus the settle steps
     assert int((rp.sweep_joint >= 0).sum()) == sum(len(a.trajectory) for a in ex.attempts[1])
+
+
+def test_signed_distance_sign_is_right_where_a_single_ray_grazes_an_edge():
+    """A point 9.8 mm outside the cube's corner that a single-ray inside test (open3d's default)
+    read as inside; found on a link box sampled along a 3D wrap.  The analytic box distance is the
+    independent reference."""
+    P = np.array([[-0.04337428, -0.0485465, -0.04347038]])
+    q = np.abs(P) - 0.04
+    exact = np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
+    d = SignedDistance(load_object("cube"))(P)
+    assert exact[0] > 0.009 and abs(d[0] - exact[0]) < 1e-6
