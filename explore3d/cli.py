@@ -498,8 +498,11 @@ def cmd_run(args) -> int:
 
         if "face_offset" in opts:
             raise UsageError("--calibrate and --face-offset exclude each other: pass one")
+        log.info("calibrating the contact thickness on the 60 mm ball")
         with _silence_fd(1):
             cal = calibrate_thickness(spec, config)
+        if bar is not None:
+            bar.reset()  # the bar's clock counts the run's wraps only
         config = dataclasses.replace(config, face_offset=cal.face_offset_m)
         report["calibration"] = cal.to_dict()
         report["config"]["explore"] = config.to_dict()
