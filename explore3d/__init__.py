@@ -26,6 +26,9 @@ _EXPORTS = {
     "BUILTIN_OBJECTS": "objects", "load_object": "objects",
     "NoContactError": "pipeline", "ReconstructionError": "pipeline", "Result": "pipeline",
     "reconstruct_exploration": "pipeline", "run": "pipeline", "write_result": "pipeline",
+    "ControlConfig": "encircle", "SimConfig": "sim",
+    "ThicknessCalibration": "calibration", "calibrate_thickness": "calibration",
+    "ContactQuality": "quality", "contact_quality": "quality",
 }
 
 __all__ = sorted(_EXPORTS)
