@@ -166,6 +166,7 @@ RUN_OPTIONS = {
     # contact thickness: a known calibration (metres) or calibrate now on the 60 mm ball
     "face_offset": _nonnegative("--face-offset"),
     "calibrate": None,  # bool
+    "no_quality": None,  # bool
 }
 RUN_DEFAULTS = {"object": "cube", "arm": "default", "mode": "3d", "a": 0.05, "method": "exponential", "seed": 0,
                 "format": "obj"}
@@ -201,7 +202,7 @@ def read_toml_config(path) -> dict:
         if key not in RUN_OPTIONS:
             raise UsageError(f"unknown key {k!r} in config {path}; valid keys: {', '.join(sorted(RUN_OPTIONS))}")
         check = RUN_OPTIONS[key]
-        if key in ("mirrored", "no_pictures", "calibrate"):
+        if key in ("mirrored", "no_pictures", "calibrate", "no_quality"):
             out[key] = _check_bool(v, key)
         elif check is str:
             if not isinstance(v, str):
@@ -251,6 +252,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "vertex distance from the centre); contact points beyond it are dropped")
     r.add_argument("--no-pictures", dest="no_pictures", action="store_true", default=None,
                    help="skip the PNG pictures (faster)")
+    r.add_argument("--no-quality", dest="no_quality", action="store_true", default=None,
+                   help="skip the contact-quality figures (they need the run's recorded joint trajectories "
+                        "and the true mesh; evaluation only, after the run)")
     t_ = r.add_mutually_exclusive_group()
     t_.add_argument("--face-offset", dest="face_offset", type=RUN_OPTIONS["face_offset"],
                     help="calibrated contact thickness, metres: link faces are pushed this far towards the "
@@ -438,6 +442,10 @@ def cmd_run(args) -> int:
     out = Path(opts["out"])
     _check_object_name(opts["object"])
     config = explore_config(opts)
+    if not opts.get("no_quality"):
+        import dataclasses
+
+        config = dataclasses.replace(config, record=True)  # the quality figures read the trajectories
 
     from .arm import load_arm
 
@@ -528,6 +536,11 @@ def cmd_run(args) -> int:
         summary.pop(k)
     report.update(summary)
     report["errors"] = err.to_dict()
+    if not opts.get("no_quality"):
+        from .quality import contact_quality
+
+        # Evaluation only, after the run: the recorded joint trajectories against the true mesh.
+        report["contact_quality"] = contact_quality(ex, mesh).to_dict()
     if config.mode == "planar":
         report["section_z_m"] = float(res.centre[2])  # the arm's plane passes through the rough centre
     pictures = not opts.get("no_pictures", False)

@@ -335,6 +335,10 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     report = json.loads((out / "report.json").read_text())
     assert report["object"] == "cube" and report["mode"] == "planar" and report["n_wraps"] == 3
     assert report["config"]["explore"]["directions"] == 3
+    # the contact-quality figures, evaluated after the run against the true cube
+    cq = report["contact_quality"]
+    assert cq["n_detections"] == report["n_contacts"] and cq["n_attempts"] == 3
+    assert 0.0 <= cq["false_fraction"] <= 1.0 and cq["penetration_max_m"] < 1e-3
     assert report["config"]["arm"]["n_links"] == 8
     assert set(report["versions"]) >= {"explore3d", "numpy", "scipy", "trimesh", "pybullet", "shapely"}
     for k in ("object", "mode", "arm", "n_wraps", "n_points", "a", "method", "percent_error", "iou", "chamfer_m",
@@ -386,7 +390,8 @@ _FAST = {"planar": ["--mode", "planar", "--directions", "3", "--attempts", "1"],
 
 @pytest.mark.parametrize("mode", ["planar", "3d"])
 def test_cli_and_api_give_the_same_estimate(tmp_path, capsys, small_arm, mode):
-    """``explore3d run`` and ``explore3d.run`` with the same configuration: the same numbers."""
+    """``explore3d run`` and ``explore3d.run`` with the same configuration: the same numbers (the
+    command line also records the trajectories for its quality figures: recording changes nothing)."""
     from explore3d import ExploreConfig
     from explore3d import run as api_run
 
@@ -424,7 +429,7 @@ def test_run_every_object(tmp_path, capsys, small_arm, obj, mode):
     size = ["--size", "0.1"] if obj.startswith("pybullet_data:") else []
     out = tmp_path / "o"
     code, _, err = run(capsys, "run", obj, *size, "--out", str(out), "--arm", str(small_arm), *_FAST[mode],
-                       "--no-pictures", "-q")
+                       "--no-pictures", "--no-quality", "-q")
     assert code == 0, err
     report = json.loads((out / "report.json").read_text())
     assert math.isfinite(report["percent_error"]) and report["percent_error"] >= 0
@@ -513,6 +518,7 @@ def test_run_calibrate_applies_the_ball_calibration(tmp_path, capsys, small_arm)
     assert 0 < off < 0.002 and cal["calibration"]["n_points"] > 0
     assert cal["config"]["explore"]["face_offset"] == off and raw["config"]["explore"]["face_offset"] == 0.0
     assert cal["n_contacts"] == raw["n_contacts"]  # the offset moves points, not the arm
+    assert cal["contact_quality"]["face_offset_m"] == off
     assert cal["estimate_size"] < raw["estimate_size"]
 
 
