@@ -48,9 +48,19 @@ class Result:
     def summary(self) -> dict:
         """The figures of a run as a JSON-ready dict: :func:`exploration_summary`, ``n_points_used``,
         ``percent_error``, ``iou``, ``chamfer_m``, ``hausdorff_m``, ``true_size``, ``estimate_size``
-        (m^2 planar, m^3 3D; ``size_unit``), ``centre_m`` and ``radius_m`` (the rough bound)."""
+        (m^2 planar, m^3 3D; ``size_unit``), ``centre_m`` and ``radius_m`` (the rough bound), and
+        ``estimate_convex_hull``: the estimate's convex hull ``size`` (m^2 / m^3) and ``centre_m``
+        (its centroid, world frame), what a grasp planner takes as the object's extent."""
         e = self.error
+        est = self.estimate
+        if e.dim == 2:
+            ch = est.convex_hull
+            hull = {"size": float(ch.area), "centre_m": [float(ch.centroid.x), float(ch.centroid.y)]}
+        else:
+            ch = est.convex_hull
+            hull = {"size": float(ch.volume), "centre_m": [float(x) for x in ch.center_mass]}
         return {**exploration_summary(self.exploration), "n_points_used": self.n_points_used,
+                "estimate_convex_hull": hull,
                 "percent_error": e.percent, "iou": e.iou, "chamfer_m": e.chamfer_m, "hausdorff_m": e.hausdorff_m,
                 "true_size": e.true_size, "estimate_size": e.estimate_size,
                 "size_unit": "m^2" if e.dim == 2 else "m^3",

@@ -335,6 +335,10 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     report = json.loads((out / "report.json").read_text())
     assert report["object"] == "cube" and report["mode"] == "planar" and report["n_wraps"] == 3
     assert report["config"]["explore"]["directions"] == 3
+    # the estimate's convex hull (a polygon here): at least the estimate's area, centred near the cube's axis
+    ch = report["estimate_convex_hull"]
+    assert ch["size"] >= report["estimate_size"] * (1 - 1e-9) and len(ch["centre_m"]) == 2
+    assert np.hypot(*ch["centre_m"]) < 0.01
     # the contact-quality figures, evaluated after the run against the true cube
     cq = report["contact_quality"]
     assert cq["n_detections"] == report["n_contacts"] and cq["n_attempts"] == 3
@@ -435,6 +439,8 @@ def test_run_every_object(tmp_path, capsys, small_arm, obj, mode):
     assert math.isfinite(report["percent_error"]) and report["percent_error"] >= 0
     assert 0 < report["iou"] <= 1 and report["n_contacts"] > 0
     assert 0 < report["n_points_used"] <= report["n_points"]
+    ch = report["estimate_convex_hull"]  # the estimate's convex hull contains it
+    assert ch["size"] >= report["estimate_size"] * (1 - 1e-9) and len(ch["centre_m"]) == (2 if mode == "planar" else 3)
 
     mesh = load_object(obj, size=0.1 if size else None)
     c, radius = rough_bound(mesh.vertices)
