@@ -145,13 +145,63 @@ def within_bound(points, centre, radius: float) -> np.ndarray:
     return np.linalg.norm(P - c, axis=1) <= radius
 
 
-def reconstruct_exploration(ex: Exploration, centre, radius: float, a: float = 0.05, method: str = "exponential"):
+#: A point is an outlier when its distance from the centre is below this fraction of the median
+#: distance of its angular neighbours from *other* wraps (see :func:`angular_outliers`).
+OUTLIER_RATIO = 0.5
+
+
+def angular_outliers(points, centre, groups, ratio: float = OUTLIER_RATIO, k: int = 16) -> np.ndarray:
+    """(m,) bool mask of points (m, d), metres, far *inside* what the other wraps saw in the same
+    direction: distance from ``centre`` (d,) below ``ratio`` x the median distance of its angular
+    neighbours (up to 4k nearest directions) that come from other ``groups`` (m,) (wraps).
+
+    The inverse hull keeps every point nearer the centre than its surroundings, so one link that
+    ended up inside the object would carve a deep pit.  Measured: in one of 144 3D wraps around the
+    50 mm sphere two links passed through PyBullet's surface-only triangle mesh and stopped 8-12 mm
+    from the centre; the volume error went from 8% to 35%.  A wrap cannot vouch for itself, so
+    only other wraps' points count as neighbours; points without such neighbours are kept.
+    """
+    from scipy.spatial import cKDTree
+
+    P = np.asarray(points, dtype=float)
+    g = np.asarray(groups)
+    d = P.shape[1]
+    V = P - np.asarray(centre, dtype=float)[:d]
+    r = np.linalg.norm(V, axis=1)
+    out = np.zeros(len(P), dtype=bool)
+    if len(P) < 2:
+        return out
+    u = V / np.maximum(r, 1e-12)[:, None]
+    kq = min(len(P), 4 * k)
+    _, idx = cKDTree(u).query(u, k=kq)
+    idx = idx.reshape(len(P), -1)
+    rn = np.where(g[idx] != g[:, None], r[idx], np.nan)
+    has = np.isfinite(rn).any(axis=1)
+    med = np.full(len(P), np.nan)
+    med[has] = np.nanmedian(rn[has], axis=1)
+    out[has] = r[has] < ratio * med[has]
+    return out
+
+
+def hull_input_mask(ex: Exploration, centre, radius: float, outlier_ratio: float | None = OUTLIER_RATIO) -> np.ndarray:
+    """(m,) bool mask of the exploration's points the reconstruction uses: within ``radius`` metres
+    of the rough ``centre`` and, unless ``outlier_ratio`` is None, not an :func:`angular_outliers`."""
+    keep = within_bound(ex.points, centre, radius)
+    if outlier_ratio is not None and keep.any():
+        idx = np.nonzero(keep)[0]
+        keep[idx[angular_outliers(ex.points[idx], centre, ex.point_wrap[idx], outlier_ratio)]] = False
+    return keep
+
+
+def reconstruct_exploration(ex: Exploration, centre, radius: float, a: float = 0.05, method: str = "exponential",
+                            outlier_ratio: float | None = OUTLIER_RATIO):
     """Inverse hull of an exploration's points about the rough ``centre`` (3,), dropping points
-    farther than ``radius`` metres from it.  Planar explorations use the x-y components."""
+    farther than ``radius`` metres from it and points far inside what other wraps saw in the same
+    direction (:func:`hull_input_mask`).  Planar explorations use the x-y components."""
     from .hull import inverse_hull
 
     c = np.asarray(centre, dtype=float)[: ex.points.shape[1]]
-    P = ex.points[within_bound(ex.points, centre, radius)]
+    P = ex.points[hull_input_mask(ex, centre, radius, outlier_ratio)]
     return inverse_hull(P, centre=c, a=a, method=method)
 
 
@@ -223,7 +273,7 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
             "or a correct rough bound (centre=/radius=, --centre/--radius)",
             exploration=ex,
         )
-    keep = within_bound(ex.points, centre, radius)
+    keep = hull_input_mask(ex, centre, radius)
     try:
         hull = reconstruct_exploration(ex, centre, radius, a=a, method=method)
     except ValueError as exc:

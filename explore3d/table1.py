@@ -76,7 +76,7 @@ def table3d_rows(a: float = 0.05, arm="default", config=None, calibrate: bool = 
     from .hull import inverse_hull
     from .metrics import shape_error
     from .objects import load_object
-    from .pipeline import run, within_bound
+    from .pipeline import angular_outliers, run, within_bound
 
     import numpy as np
 
@@ -98,8 +98,11 @@ def table3d_rows(a: float = 0.05, arm="default", config=None, calibrate: bool = 
             # The same joint angles, the faces pushed in by the calibrated thickness.
             cal = dataclasses.replace(ex.config, face_offset=offset)
             P = np.concatenate([attempt_points(ex.spec, att, cal)[np.nonzero(att.contact)[0]].reshape(-1, 3)
-                                for w in ex.attempts for att in w])
-            P = P[within_bound(P, res.centre, res.radius)]
+                                for w in ex.attempts for att in w])  # same order as ex.points
+            keep = within_bound(P, res.centre, res.radius)
+            idx = np.nonzero(keep)[0]
+            keep[idx[angular_outliers(P[idx], res.centre, ex.point_wrap[idx])]] = False
+            P = P[keep]
             err = shape_error(inverse_hull(P, centre=res.centre, a=a).shape(), mesh)
             row["percent_calibrated"] = err.percent
             row["volume_error_calibrated_m3"] = err.sym_diff

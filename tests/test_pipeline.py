@@ -183,3 +183,48 @@ def test_explore_cube_script_end_to_end(tmp_path):
     assert np.isfinite(err.percent) and err.percent > 0
     est = trimesh.load(str(out / "estimate.obj"))
     assert est.is_watertight and est.volume == pytest.approx(poly.area * 0.08, rel=1e-5)
+
+
+# --- the outlier filter of the reconstruction --------------------------------------------------------
+
+def _sphere_groups(n_groups=12, per=200, radius=0.05, seed=0):
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=(n_groups * per, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return radius * u, np.repeat(np.arange(n_groups), per)
+
+
+def test_angular_outliers_flags_points_deep_inside_and_nothing_on_a_clean_sphere():
+    from explore3d.pipeline import angular_outliers
+
+    P, g = _sphere_groups()
+    assert not angular_outliers(P, np.zeros(3), g).any()
+    # one wrap's link that ended 10 mm from the centre (inside a 50 mm sphere)
+    bad = np.array([[0.01, 0.0, 0.0], [0.0, 0.012, 0.0]])
+    Q = np.vstack([P, bad])
+    G = np.append(g, [3, 3])
+    out = angular_outliers(Q, np.zeros(3), G)
+    assert out[-2:].all() and not out[:-2].any()
+    # a rigid motion of everything (points and centre) changes nothing
+    R = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))[0]
+    t = np.array([0.3, -0.2, 0.1])
+    assert np.array_equal(angular_outliers(Q @ R.T + t, t, G), out)
+
+
+def test_angular_outliers_keeps_a_star_shaped_concave_outline():
+    """A 5-pointed star (inner radius 0.4 x outer) sampled by several groups: concave, star-shaped
+    about its centre, nothing dropped."""
+    from explore3d.pipeline import angular_outliers
+
+    t = np.linspace(0, 2 * np.pi, 2000, endpoint=False)
+    rad = 0.05 * (0.7 + 0.3 * np.cos(5 * t))  # 0.02 .. 0.05 m
+    P = np.stack([rad * np.cos(t), rad * np.sin(t)], axis=1)
+    g = np.arange(len(t)) % 7
+    assert not angular_outliers(P, np.zeros(2), g).any()
+
+
+def test_angular_outliers_points_without_other_wraps_are_kept():
+    from explore3d.pipeline import angular_outliers
+
+    P = np.array([[0.05, 0.0], [0.01, 0.0], [0.0, 0.05]])
+    assert not angular_outliers(P, np.zeros(2), np.zeros(3, dtype=int)).any()
