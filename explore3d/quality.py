@@ -138,9 +138,14 @@ class SignedDistance:
             return np.zeros(P.shape[:-1])
         if self._scene is not None:
             t = self._o3d.core.Tensor((flat - self.centre).astype(np.float32))
-            # Inside/outside by a majority of 3 rays: with one ray open3d misclassifies points whose
-            # ray grazes an edge (found: a point 9.8 mm outside the cube's corner read as 9.8 mm inside).
-            d = self._scene.compute_signed_distance(t, nsamples=3).numpy().astype(np.float64)
+            d = self._scene.compute_signed_distance(t).numpy().astype(np.float64)
+            # One ray misreads points whose ray grazes an edge (found: a point 9.8 mm outside the
+            # cube's corner read as 9.8 mm inside); points read as inside are re-decided by a
+            # majority of 3 rays (3x the cost, so only for them).
+            inside = np.nonzero(d < 0)[0]
+            if inside.size:
+                t3 = self._o3d.core.Tensor((flat[inside] - self.centre).astype(np.float32))
+                d[inside] = self._scene.compute_signed_distance(t3, nsamples=3).numpy().astype(np.float64)
         else:
             import trimesh  # noqa: PLC0415
 
