@@ -189,6 +189,30 @@ def attempt_points(spec: ArmSpec, attempt: Attempt, config: ExploreConfig) -> np
                                config.faces, config.face_offset)
 
 
+def contact_points(spec: ArmSpec, attempts, config: ExploreConfig):
+    """The link surface points of the contact-flagged links of every attempt (see
+    :attr:`Exploration.points`), computed with ``config`` (its mode, face sampling and
+    ``face_offset``).
+
+    Args:
+        attempts: per wrap, its attempts (as :attr:`Exploration.attempts`).
+
+    Returns:
+        points (m, d), world frame, metres, and (m,) int arrays: wrap, attempt and link of each.
+    """
+    pts, pw, pa, pl = [], [], [], []
+    for wi, atts in enumerate(attempts):
+        for ai, att in enumerate(atts):
+            links = np.nonzero(att.contact)[0]
+            P = attempt_points(spec, att, config)[links]
+            k = P.shape[1]
+            pts.append(P.reshape(-1, P.shape[-1]))
+            pw.append(np.full(P.shape[0] * k, wi))
+            pa.append(np.full(P.shape[0] * k, ai))
+            pl.append(np.repeat(links, k))
+    return np.concatenate(pts), np.concatenate(pw), np.concatenate(pa), np.concatenate(pl)
+
+
 def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre=None, radius=None,
             progress=None) -> Exploration:
     """Explore ``mesh`` (a closed trimesh, metres, world frame) with ``arm`` (name, URDF path or
@@ -232,18 +256,9 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
                     progress(i + 1, len(tasks))
     attempts = tuple(tuple(r[0]) for r in results)
     steps = int(sum(r[1] for r in results))
-    pts, pw, pa, pl = [], [], [], []
-    for wi, atts in enumerate(attempts):
-        for ai, att in enumerate(atts):
-            links = np.nonzero(att.contact)[0]
-            P = attempt_points(spec, att, config)[links]
-            k = P.shape[1]
-            pts.append(P.reshape(-1, P.shape[-1]))
-            pw.append(np.full(P.shape[0] * k, wi))
-            pa.append(np.full(P.shape[0] * k, ai))
-            pl.append(np.repeat(links, k))
+    points, pw, pa, pl = contact_points(spec, attempts, config)
     return Exploration(
-        spec=spec, config=config, poses=tuple(poses), attempts=attempts, points=np.concatenate(pts),
-        point_wrap=np.concatenate(pw), point_attempt=np.concatenate(pa), point_link=np.concatenate(pl),
+        spec=spec, config=config, poses=tuple(poses), attempts=attempts, points=points,
+        point_wrap=pw, point_attempt=pa, point_link=pl,
         band=band, steps=steps, sim_time_s=steps * config.sim.timestep, wall_s=time.perf_counter() - t0,
     )

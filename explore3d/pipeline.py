@@ -29,7 +29,8 @@ class Result:
             runs use its x-y components and cut the truth at its z).
         radius: the robot's rough bounding radius, metres: points farther than this from
             ``centre`` were dropped before the hull.
-        n_points_used: how many of ``exploration.points`` were within ``radius`` (the hull's input).
+        n_points_used: how many of ``exploration.points`` the hull was built from (within ``radius``,
+            not angular outliers: :func:`hull_input_mask`).
     """
 
     exploration: Exploration
@@ -273,16 +274,16 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
             "or a correct rough bound (centre=/radius=, --centre/--radius)",
             exploration=ex,
         )
-    keep = hull_input_mask(ex, centre, radius)
     try:
         hull = reconstruct_exploration(ex, centre, radius, a=a, method=method)
     except ValueError as exc:
         what = str(exc).split("; ")[0]  # inverse_hull's own fix hints are about its arguments, not the run
+        n_used = int(hull_input_mask(ex, centre, radius).sum())
         raise ReconstructionError(
-            f"no shape from the {int(keep.sum())} link points within {radius:.3g} m of the rough centre ({what}); "
+            f"no shape from the {n_used} link points within {radius:.3g} m of the rough centre ({what}); "
             "explore from more directions or with more attempts (ExploreConfig directions/attempts, --directions/"
             "--attempts) so the arm surrounds the object, or correct the rough centre/radius", exploration=ex,
         ) from None
     truth = planar_truth(mesh, float(centre[2])) if config.mode == "planar" else mesh
     return Result(exploration=ex, hull=hull, truth=truth, error=shape_error(hull.shape(), truth, seed=seed),
-                  centre=centre, radius=radius, n_points_used=int(keep.sum()))
+                  centre=centre, radius=radius, n_points_used=len(hull.points))  # the hull's input

@@ -72,13 +72,10 @@ def table3d_rows(a: float = 0.05, arm="default", config=None, calibrate: bool = 
     """
     import dataclasses
 
-    from .explore import ExploreConfig, attempt_points
-    from .hull import inverse_hull
+    from .explore import ExploreConfig, contact_points
     from .metrics import shape_error
     from .objects import load_object
-    from .pipeline import angular_outliers, run, within_bound
-
-    import numpy as np
+    from .pipeline import reconstruct_exploration, run
 
     config = ExploreConfig(jobs=jobs) if config is None else config
     offset = None
@@ -97,13 +94,9 @@ def table3d_rows(a: float = 0.05, arm="default", config=None, calibrate: bool = 
         if offset is not None:
             # The same joint angles, the faces pushed in by the calibrated thickness.
             cal = dataclasses.replace(ex.config, face_offset=offset)
-            P = np.concatenate([attempt_points(ex.spec, att, cal)[np.nonzero(att.contact)[0]].reshape(-1, 3)
-                                for w in ex.attempts for att in w])  # same order as ex.points
-            keep = within_bound(P, res.centre, res.radius)
-            idx = np.nonzero(keep)[0]
-            keep[idx[angular_outliers(P[idx], res.centre, ex.point_wrap[idx])]] = False
-            P = P[keep]
-            err = shape_error(inverse_hull(P, centre=res.centre, a=a).shape(), mesh)
+            ex_cal = dataclasses.replace(ex, config=cal, points=contact_points(ex.spec, ex.attempts, cal)[0])
+            hull = reconstruct_exploration(ex_cal, res.centre, res.radius, a=a)
+            err = shape_error(hull.shape(), mesh)
             row["percent_calibrated"] = err.percent
             row["volume_error_calibrated_m3"] = err.sym_diff
         rows.append(row)
