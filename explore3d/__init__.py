@@ -19,7 +19,7 @@ __version__ = "0.1.0"
 
 #: Public name -> the submodule that defines it.
 _EXPORTS = {
-    "ArmSpec": "arm", "BUILTIN_ARMS": "arm", "load_arm": "arm", "write_arm_urdf": "arm",
+    "ArmSpec": "arm", "BUILTIN_ARMS": "arm", "load_arm": "arm", "write_arm_urdf": "urdf",
     "Exploration": "explore", "ExploreConfig": "explore", "explore": "explore", "rough_bound": "explore",
     "InverseHull": "hull", "inverse_hull": "hull",
     "ShapeError": "metrics", "shape_error": "metrics",

@@ -705,7 +705,7 @@ def arm_spec_from_args(args):
 
 
 def cmd_arm(args) -> int:
-    from .arm import write_arm_urdf
+    from .urdf import write_arm_urdf
 
     spec = arm_spec_from_args(args)
     path = write_arm_urdf(spec, args.out)

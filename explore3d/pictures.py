@@ -149,7 +149,7 @@ def scene_image(truth_mesh, spec, attempt, width: int = 480, height: int = 360) 
     mesh (metres, world frame) and the arm ``spec`` at ``attempt.q`` (rad) on ``attempt.T_world_base``."""
     import pybullet as p
 
-    from .arm import arm_urdf
+    from .urdf import arm_urdf
 
     cid = p.connect(p.DIRECT)
     try:

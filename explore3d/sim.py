@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .arm import ArmSpec, arm_urdf
+from .arm import ArmSpec
+from .urdf import arm_urdf
 from .kinematics import link_transforms
 
 

@@ -3,7 +3,8 @@ import numpy as np
 import pybullet
 import pytest
 
-from explore3d.arm import BUILTIN_ARMS, ArmSpec, arm_urdf, load_arm, write_arm_urdf
+from explore3d.arm import BUILTIN_ARMS, ArmSpec, load_arm
+from explore3d.urdf import arm_urdf, write_arm_urdf
 from explore3d.kinematics import link_surface_points, link_transforms
 from explore3d.tolerances import FK_ATOL_M
 
