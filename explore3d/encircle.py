@@ -7,9 +7,9 @@ with a small inward bias, the paper's proposal against relaxation) and the next 
 goes on until every joint has made contact or reached its limit.  One *wrap*: several attempts
 from one base pose, the base joint stopping a step short of its previous stop angle each time.
 
-The code here reads joint angles and its own commanded references and nothing else about the
-world: no contact queries, ray tests or object poses (a test runs a whole exploration with those
-PyBullet functions patched to raise).
+The code here sees the arm only through the :class:`~explore3d.robot.Robot` interface: joint
+readings, its own commands and model, the known base pose.  No contact queries, ray tests or
+object poses (a test runs a whole exploration with those PyBullet functions removed).
 """
 from __future__ import annotations
 
@@ -20,7 +20,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .arm import ArmSpec
-from .sim import ArmSimulation, SimConfig
+from .detect import ContactBand, SweepDetector
+from .kinematics import gravity_torques
+from .robot import JointCommand, JointReading, Robot
 
 
 class StopReason(enum.Enum):
@@ -44,8 +46,10 @@ class ControlConfig:
             joint k to the tip (proximal joints carry long chains: slower, gentler impacts).
             None: every joint sweeps at ``speed``.
         ramp_time: time over which the swept joint's reference speed ramps up from 0, s.
-        band_factor: the contact band is ``band_factor`` x the largest free-motion error ...
-        band_margin: ... plus this, rad (covers solver noise the calibration did not see).
+        band_factor: the contact band of each joint is ``band_factor`` (dimensionless, >= 1)
+            times the largest signal measured without contact by
+            :func:`explore3d.band.calibrate_band` (free motion and contact-free sweeps on the
+            known calibration ball).
         hold_bias: held joints' reference is set this far beyond the angle at contact, rad, in
             the curl direction (the paper's proposed small inward push; 0 holds in place).
         limit_margin: sweeps stop this far short of the joint's upper limit, rad.
@@ -57,8 +61,9 @@ class ControlConfig:
             knocking a held joint away.
         watch_held: also watch the held (proximal) joints' errors; off, only the swept joint's
             lag and the not-yet-swept (distal) joints' errors signal contact.
-        gravity_compensation: the motors cancel the links' weights (from the arm's own model and
-            the known base pose); the swept joint's torque limit then leaves gravity out.
+        gravity_compensation: the motors cancel the links' weights with a feed-forward torque
+            computed from the arm's own model, the sensed joint angles, the known base pose and
+            gravity; the swept joint's torque limit then leaves gravity out.
         rereference_held: after each detection the held joints' references are reset to their
             measured angles (no held joint stays saturated against the object).
         max_curl: a joint is not swept once the joints before it have curled this much in
@@ -73,13 +78,10 @@ class ControlConfig:
     tip_speed: float | None = 0.3
     ramp_time: float = 0.05
     band_factor: float = 1.5
-    band_margin: float = 0.02
     hold_bias: float = 0.0
     limit_margin: float = 0.02
     sweep_torque_factor: float = 1.5
     sweep_torque_margin: float = 0.05
-    hold_torque_factor: float = 0.0
-    other_margin: float = 0.05
     watch_held: bool = False
     gravity_compensation: bool = True
     rereference_held: bool = False
@@ -88,26 +90,25 @@ class ControlConfig:
     max_sweep_steps: int = 2000
 
     def __post_init__(self):
-        for name in ("speed", "band_factor"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0; got {getattr(self, name)}")
-        if self.tip_speed is not None and not self.tip_speed > 0:
-            raise ValueError(f"tip_speed must be > 0 m/s or None; got {self.tip_speed}")
-        for name in ("ramp_time", "band_margin", "hold_bias", "limit_margin"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} must be >= 0; got {getattr(self, name)}")
+        def number(name, lo, unit, strict):
+            v = getattr(self, name)
+            ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and (v > lo if strict else v >= lo)
+            if not ok:
+                raise ValueError(f"ControlConfig.{name} must be a finite number {'>' if strict else '>='} {lo:g}{unit}; got {v!r}")
 
-
-@dataclass(frozen=True)
-class ContactBand:
-    """Free-motion error bands, rad, per joint: ``swept[j]`` bounds the lag of joint j while it
-    sweeps; ``other[j]`` bounds |error| of joint j while another joint sweeps."""
-
-    swept: np.ndarray
-    other: np.ndarray
-
-    def to_dict(self) -> dict:
-        return {"swept_rad": self.swept.tolist(), "other_rad": self.other.tolist()}
+        number("speed", 0, " rad/s", True)
+        number("band_factor", 1, "", False)
+        number("sweep_torque_factor", 0, "", True)
+        number("max_curl", 0, " rad", True)
+        for name, unit in (("ramp_time", " s"), ("hold_bias", " rad"), ("limit_margin", " rad"),
+                           ("sweep_torque_margin", " N m")):
+            number(name, 0, unit, False)
+        if self.tip_speed is not None:
+            number("tip_speed", 0, " m/s (or None)", True)
+        for name, lo in (("settle_steps", 0), ("max_sweep_steps", 1)):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < lo:
+                raise ValueError(f"ControlConfig.{name} must be an integer >= {lo}; got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -161,139 +162,149 @@ def sweep_torque_limits(spec: ArmSpec, cfg: ControlConfig) -> np.ndarray:
     return cfg.sweep_torque_factor * need + cfg.sweep_torque_margin
 
 
-def run_attempt(sim: ArmSimulation, T_world_base, band: ContactBand | None, cfg: ControlConfig = ControlConfig(),
-                base_stop: float | None = None, record: bool = False, _errors: list | None = None) -> Attempt:
+class Controller:
+    """Sends commands through the robot interface and adds the model-based gravity feed-forward.
+
+    Args:
+        robot: the arm (the :class:`~explore3d.robot.Robot` interface only).
+        cfg: the controller settings.
+        T_world_base: (4, 4) the known base pose of this motion.
+        record: keep the readings and references of every sweep step.
+    """
+
+    def __init__(self, robot: Robot, cfg: ControlConfig, T_world_base, record: bool = False):
+        self.robot, self.cfg = robot, cfg
+        self.spec: ArmSpec = robot.spec
+        self.T = np.asarray(T_world_base, dtype=np.float64)
+        g = np.asarray(robot.gravity, dtype=np.float64)
+        # Gravity along the joint axes (the arm's plane horizontal) loads no joint: nothing to cancel.
+        z = self.T[:3, 2]
+        self.compensate = cfg.gravity_compensation and float(np.linalg.norm(g - (g @ z) * z)) > 1e-9
+        self.full = np.array(self.spec.joint_torques())
+        self.zero = np.zeros(self.spec.n_links)
+        self.reading: JointReading | None = None
+        self.steps = 0
+        self.traj, self.traj_ref = ([], []) if record else (None, None)
+
+    def start(self) -> np.ndarray:
+        """Begin the motion with the arm straight at rest; returns the first reading's angles."""
+        self.reading = self.robot.start(self.T, self.zero)
+        return self.reading.q
+
+    def send(self, q_ref, dq_ref=None, limits=None) -> np.ndarray:
+        """One control step: references (n,) rad, velocity feed-forward (n,) rad/s (default 0),
+        torque limits (n,) N m (default the arm's); returns the reading's angles (n,), rad."""
+        ff = (-gravity_torques(self.spec, self.reading.q, self.T, self.robot.gravity) if self.compensate
+              else self.zero)
+        cmd = JointCommand(q_ref=q_ref.copy(), dq_ref=self.zero if dq_ref is None else dq_ref.copy(),
+                           torque_limit=self.full if limits is None else limits, tau_ff=ff)
+        self.reading = self.robot.step(cmd)
+        self.steps += 1
+        return self.reading.q
+
+    def hold(self, q_ref) -> np.ndarray:
+        """Hold ``q_ref`` for ``settle_steps`` steps; returns the last reading's angles."""
+        q = self.reading.q
+        for _ in range(self.cfg.settle_steps):
+            q = self.send(q_ref)
+        return q
+
+
+def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: ContactBand | None,
+                speed: float, torque_limit: float, is_base_stop: bool = False, observer=None) -> StopReason:
+    """Sweep joint ``k``'s reference (in place in ``q_ref`` (n,), rad) towards ``stop`` rad at up to
+    ``speed`` rad/s with motor torque limit ``torque_limit`` N m, until the detector fires
+    (``band``; None: never) or the stop is reached.  ``observer(k, reading, lag, sig)`` sees every
+    step's filtered signals (band calibration)."""
+    cfg, dt = ctl.cfg, ctl.robot.dt
+    n = len(q_ref)
+    at_stop = StopReason.STOP_ANGLE if is_base_stop else StopReason.LIMIT
+    if q_ref[k] >= stop:
+        return at_stop
+    dq_ref = np.zeros(n)
+    limits = ctl.full.copy()
+    limits[k] = torque_limit
+    det = SweepDetector(k, q_ref, ctl.reading.q, cfg.watch_held)
+    for i in range(cfg.max_sweep_steps):
+        # speed ramps up from rest and down again before the stop angle (no false alarm there)
+        w = min(_ramp_speed(speed, cfg.ramp_time, i * dt),
+                _ramp_speed(speed, cfg.ramp_time, max(0.0, (stop - q_ref[k]) / speed)))
+        w = max(w, speed * 0.05)
+        prev = q_ref[k]
+        q_ref[k] = min(stop, q_ref[k] + w * dt)
+        dq_ref[k] = w if q_ref[k] < stop else 0.0
+        q = ctl.send(q_ref, dq_ref, limits)
+        if ctl.traj is not None:
+            ctl.traj.append(q)
+            ctl.traj_ref.append(q_ref.copy())
+        lag, sig = det.update(prev, q_ref, q)
+        if observer is not None:
+            observer(k, ctl.reading, lag, sig)
+        if band is not None and i > 0 and SweepDetector.exceeds(band, k, lag, sig):
+            return StopReason.CONTACT
+        if q_ref[k] >= stop:
+            return at_stop
+    return StopReason.TIMEOUT
+
+
+def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: ControlConfig = ControlConfig(),
+                base_stop: float | None = None, record: bool = False, observer=None) -> Attempt:
     """One attempt from the base pose ``T_world_base`` (4, 4).
 
     Args:
-        sim: the simulation (only set_base / reset_joints / step are used).
-        band: the contact band; None disables detection (free-motion calibration).
+        robot: the arm, seen through the :class:`~explore3d.robot.Robot` interface only.
+        band: the contact band; None disables detection.
         base_stop: the base joint's stop angle, rad (None: sweep until contact or limit).
-        record: keep the joint angles of every step (for free-space carving).
-        _errors: calibration hook; receives (k, err (n,)) for every step when given.
+        record: keep the joint readings and references of every sweep step.
+        observer: ``observer(k, reading, lag, sig)`` called at every sweep step (band calibration).
     """
-    spec: ArmSpec = sim.spec
+    spec: ArmSpec = robot.spec
     n = spec.n_links
-    dt = sim.config.timestep
-    sim.set_base(T_world_base)
+    ctl = Controller(robot, cfg, T_world_base, record)
     q_ref = np.zeros(n)
-    sim.reset_joints(q_ref)
-    q = q_ref.copy()
-    for _ in range(cfg.settle_steps):
-        q = sim.step(q_ref, gravity_compensation=cfg.gravity_compensation)
+    ctl.start()
+    q = ctl.hold(q_ref)
     upper = spec.joint_upper - cfg.limit_margin
     sweep_torques = sweep_torque_limits(spec, cfg)
     speeds = sweep_speeds(spec, cfg)
     contact = np.zeros(n, dtype=bool)
     reasons: list = []
     detect_step = np.zeros(n, dtype=int)
-    traj, traj_ref = ([], []) if record else (None, None)
-    steps = 0
     for k in range(n):
-        stop = upper if (k > 0 or base_stop is None) else min(upper, base_stop)
-        reason = StopReason.TIMEOUT
         if k > 0 and q[:k].sum() >= cfg.max_curl:
             reasons.extend([StopReason.WRAPPED] * (n - k))
-            detect_step[k:] = steps
+            detect_step[k:] = ctl.steps
             break
-        if q_ref[k] >= stop:
-            reason = StopReason.STOP_ANGLE if (k == 0 and base_stop is not None) else StopReason.LIMIT
-        else:
-            dq_ref = np.zeros(n)
-            forces = np.array(sim.torques)
-            forces[:k] = cfg.hold_torque_factor * sweep_torques[:k] if cfg.hold_torque_factor else forces[:k]
-            forces[k] = sweep_torques[k]
-            base_err = q_ref - q  # errors of the other joints are judged against their values now
-            prev_lag, prev_sig = 0.0, np.zeros(n)
-            for i in range(cfg.max_sweep_steps):
-                # speed ramps up from rest and down again before the stop angle (no false alarm there)
-                wk = speeds[k]
-                w = min(_ramp_speed(wk, cfg.ramp_time, i * dt),
-                        _ramp_speed(wk, cfg.ramp_time, max(0.0, (stop - q_ref[k]) / wk)))
-                w = max(w, wk * 0.05)
-                q_ref[k] = min(stop, q_ref[k] + w * dt)
-                dq_ref[k] = w if q_ref[k] < stop else 0.0
-                q = sim.step(q_ref, dq_ref, forces, gravity_compensation=cfg.gravity_compensation)
-                steps += 1
-                if record:
-                    traj.append(q)
-                    traj_ref.append(q_ref.copy())
-                # Lag of the swept joint behind its previous reference (the motor aims at the
-                # reference one step ahead, so q_ref - q alone reads one step's travel low).
-                lag = (q_ref[k] - w * dt) - q[k]
-                sig = (q_ref - q) - base_err
-                sig[k] = 0.0
-                if not cfg.watch_held:
-                    sig[:k] = 0.0
-                # Mean of this and the previous step: a two-step chatter of a loaded joint cancels,
-                # a contact (a persistent error) does not.
-                lag2, sig2 = 0.5 * (lag + prev_lag), 0.5 * (sig + prev_sig)
-                prev_lag, prev_sig = lag, sig
-                if _errors is not None:
-                    _errors.append((k, lag2, sig2))
-                if band is not None and i > 0 and (lag2 > band.swept[k] or (np.abs(sig2) > band.other).any()):
-                    reason = StopReason.CONTACT
-                    break
-                if q_ref[k] >= stop:
-                    reason = StopReason.STOP_ANGLE if (k == 0 and base_stop is not None) else StopReason.LIMIT
-                    break
+        base = k == 0 and base_stop is not None
+        stop = min(upper, base_stop) if base else upper
+        reason = sweep_joint(ctl, k, q_ref, stop, band, speeds[k], sweep_torques[k], base, observer)
+        q = ctl.reading.q
         if reason is StopReason.CONTACT:
             contact[k] = True
             q_ref[k] = q[k] + cfg.hold_bias
             if cfg.rereference_held:
                 q_ref[:k] = q[:k] + cfg.hold_bias * contact[:k]
-        for _ in range(cfg.settle_steps):
-            q = sim.step(q_ref, gravity_compensation=cfg.gravity_compensation)
-            steps += 1
+        q = ctl.hold(q_ref)
         reasons.append(reason)
-        detect_step[k] = steps
+        detect_step[k] = ctl.steps
     return Attempt(
         T_world_base=np.asarray(T_world_base, dtype=float).copy(), q=q.copy(), q_ref=q_ref.copy(), contact=contact,
-        reasons=tuple(reasons), detect_step=detect_step, steps=steps,
-        trajectory=np.array(traj) if record else None, trajectory_ref=np.array(traj_ref) if record else None,
+        reasons=tuple(reasons), detect_step=detect_step, steps=ctl.steps,
+        trajectory=np.array(ctl.traj) if record else None, trajectory_ref=np.array(ctl.traj_ref) if record else None,
     )
 
 
-def run_wrap(sim: ArmSimulation, T_world_base, band: ContactBand, attempts: int = 4, base_step: float = 0.1,
+def run_wrap(robot: Robot, T_world_base, band: ContactBand, attempts: int = 4, base_step: float = 0.1,
              cfg: ControlConfig = ControlConfig(), record: bool = False) -> list[Attempt]:
     """``attempts`` attempts from one base pose: the first sweeps the base joint until contact;
     each later one stops the base joint ``base_step`` rad short of the previous stop angle."""
     out = []
     stop = None
     for m in range(attempts):
-        att = run_attempt(sim, T_world_base, band, cfg, base_stop=stop, record=record)
+        att = run_attempt(robot, T_world_base, band, cfg, base_stop=stop, record=record)
         out.append(att)
         prev = att.q[0] if stop is None else stop
         stop = prev - base_step
         if stop <= 0:
             break
     return out
-
-
-def calibrate_band(spec: ArmSpec, cfg: ControlConfig = ControlConfig(), sim_config: SimConfig = SimConfig(),
-                   base_transforms=None) -> ContactBand:
-    """The free-motion error band: the same sweeps with no object, per joint.
-
-    Every joint sweeps from straight to its limit at ``cfg.speed`` (the motion of an attempt that
-    never touches anything) from each base pose in ``base_transforms`` (default: the arm's plane
-    vertical and horizontal, the worst and best cases for gravity); the band is
-    ``band_factor * max|error| + band_margin`` per joint.
-    """
-    if base_transforms is None:
-        vertical = np.eye(4)
-        vertical[:3, :3] = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # base +y up: curl against gravity
-        vertical_down = np.eye(4)
-        vertical_down[:3, :3] = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
-        base_transforms = [np.eye(4), vertical, vertical_down]
-    n = spec.n_links
-    swept = np.zeros(n)
-    other = np.zeros(n)
-    with ArmSimulation(spec, config=sim_config) as sim:
-        for T in base_transforms:
-            errs: list = []
-            run_attempt(sim, T, None, cfg, _errors=errs)
-            for k, lag, sig in errs:
-                swept[k] = max(swept[k], lag)
-                np.maximum(other, np.abs(sig), out=other)
-    return ContactBand(swept=cfg.band_factor * swept + cfg.band_margin,
-                       other=cfg.band_factor * other + cfg.other_margin)

@@ -19,8 +19,12 @@ import numpy as np
 
 from .arm import ArmSpec, load_arm
 from .directions import WrapPose, planar_wrap_poses, spatial_wrap_poses
-from .encircle import Attempt, ContactBand, ControlConfig, calibrate_band, run_wrap
+from .band import cached_band
+from .detect import ContactBand
+from .encircle import Attempt, ControlConfig, run_wrap
 from .kinematics import link_surface_points
+from .robot import RecordingRobot, RobotLog
+from .sensing import SensorConfig
 from .sim import ArmSimulation, SimConfig
 
 log = logging.getLogger(__name__)
@@ -55,8 +59,13 @@ class ExploreConfig:
         face_offset: calibrated contact thickness, metres (pushes faces towards the object).
         control: the reference controller.
         sim: physics settings.
+        sensors: what the servos report (:class:`~explore3d.sensing.SensorConfig`; default: a
+            4096-count encoder, 1 mN m torque resolution and noise, one step of delay;
+            ``SensorConfig.ideal()`` for exact readings).
         jobs: worker processes (None: all cores).  Results do not depend on it.
-        record: keep every step's joint angles (for free-space carving).
+        record: keep every sweep step's joint readings and references in the attempts, and
+            each wrap's :class:`~explore3d.robot.RobotLog` (everything through the robot
+            interface) in :attr:`Exploration.logs`.
     """
 
     mode: str = "3d"
@@ -73,6 +82,7 @@ class ExploreConfig:
     face_offset: float = 0.0
     control: ControlConfig = field(default_factory=ControlConfig)
     sim: SimConfig = field(default_factory=SimConfig)
+    sensors: SensorConfig = field(default_factory=SensorConfig)
     jobs: int | None = 1
     record: bool = False
 
@@ -109,10 +119,11 @@ class Exploration:
             not swept because the chain had already curled a full turn, are left out: they touch
             nothing (their poses are in ``attempts``).
         point_wrap, point_attempt, point_link: (m,) int: where each point came from.
-        band: the calibrated contact band.
+        band: the calibrated contact band (:func:`explore3d.band.cached_band`).
         steps: physics steps taken (all wraps).
         sim_time_s: simulated time, s.
         wall_s: wall-clock time of the exploration, s.
+        logs: per wrap, its :class:`~explore3d.robot.RobotLog` when ``config.record``, else None.
     """
 
     spec: ArmSpec
@@ -127,6 +138,7 @@ class Exploration:
     steps: int
     sim_time_s: float
     wall_s: float
+    logs: tuple | None = None
 
     @property
     def n_wraps(self) -> int:
@@ -136,13 +148,6 @@ class Exploration:
     def n_contacts(self) -> int:
         """Number of joint sweeps that ended in a detected contact."""
         return int(sum(a.contact.sum() for w in self.attempts for a in w))
-
-
-@functools.lru_cache(maxsize=16)
-def _band(spec: ArmSpec, control: ControlConfig, sim: SimConfig, planar: bool) -> ContactBand:
-    if planar:  # gravity along the joint axes: the horizontal plane is the only orientation
-        return calibrate_band(spec, control, sim, base_transforms=[np.eye(4)])
-    return calibrate_band(spec, control, sim)
 
 
 def rough_bound(vertices) -> tuple[np.ndarray, float]:
@@ -171,12 +176,17 @@ def _init_worker(spec, vertices, faces, sim_config):
 
 
 def _run_one(args):
-    T, band, config = args
-    sim = _WORKER["sim"]
-    s0 = sim.steps
-    atts = run_wrap(sim, T, band, attempts=config.attempts, base_step=config.base_step, cfg=config.control,
+    """One wrap in a worker: the world stays here; the controller gets the robot interface only.
+    The sensor noise is seeded by the wrap's index, so results do not depend on the jobs."""
+    index, T, band, config = args
+    world = _WORKER["sim"]
+    robot = world.robot(config.sensors)
+    robot.reseed((0, index))
+    rec = RecordingRobot(robot) if config.record else robot
+    s0 = world.steps
+    atts = run_wrap(rec, T, band, attempts=config.attempts, base_step=config.base_step, cfg=config.control,
                     record=config.record)
-    return atts, sim.steps - s0
+    return atts, world.steps - s0, (rec.log() if config.record else None)
 
 
 def attempt_points(spec: ArmSpec, attempt: Attempt, config: ExploreConfig) -> np.ndarray:
@@ -229,10 +239,10 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
     centre = c0 if centre is None else np.asarray(centre, float)
     radius = r0 if radius is None else float(radius)
     poses = wrap_poses(spec, config, centre, radius)
-    band = _band(spec, config.control, config.sim, config.mode == "planar")
+    band = cached_band(spec, config.control, config.sim, config.sensors, config.mode == "planar")
     vertices = np.asarray(mesh.vertices, dtype=float)
     faces = np.asarray(mesh.faces, dtype=np.int64)
-    tasks = [(p.T_world_base, band, config) for p in poses]
+    tasks = [(i, p.T_world_base, band, config) for i, p in enumerate(poses)]
     jobs = config.jobs or os.cpu_count() or 1
     results = []
     if jobs == 1 or len(tasks) == 1:
@@ -261,4 +271,5 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
         spec=spec, config=config, poses=tuple(poses), attempts=attempts, points=points,
         point_wrap=pw, point_attempt=pa, point_link=pl,
         band=band, steps=steps, sim_time_s=steps * config.sim.timestep, wall_s=time.perf_counter() - t0,
+        logs=tuple(r[2] for r in results) if config.record else None,
     )

@@ -88,3 +88,48 @@ def link_surface_points(spec: ArmSpec, q, T_world_base=None, n_along: int = 5, n
         local[:, 1] += np.sign(local[:, 1]) * face_offset
     T = link_transforms(spec, q, T_world_base)
     return np.einsum("...ij,kj->...ki", T[..., :3, :3], local) + T[..., None, :3, 3]
+
+
+def point_jacobian(spec: ArmSpec, q, link: int, point_local, T_world_base=None) -> np.ndarray:
+    """(3, n) translational Jacobian, world frame, of a point fixed on ``link``.
+
+    Column j maps joint j's velocity (rad/s) to the point's velocity (m/s): ``z x (p - o_j)`` for
+    the joints up to ``link`` (all joint axes are the base z axis), 0 beyond.
+
+    Args:
+        q: (n,) joint angles, rad.
+        link: index of the link the point is fixed to.
+        point_local: (3,) the point in that link's frame, metres.
+        T_world_base: (4, 4) base pose (None: identity).
+    """
+    q = np.asarray(q, dtype=np.float64)
+    if q.shape != (spec.n_links,):
+        raise ValueError(f"q must have shape ({spec.n_links},); got {q.shape}")
+    if not 0 <= int(link) < spec.n_links:
+        raise ValueError(f"link must be in [0, {spec.n_links - 1}]; got {link}")
+    T = link_transforms(spec, q, T_world_base)
+    p = T[link, :3, :3] @ np.asarray(point_local, dtype=np.float64) + T[link, :3, 3]
+    z = T[0, :3, 2]
+    J = np.zeros((3, spec.n_links))
+    J[:, : link + 1] = np.cross(z, p - T[: link + 1, :3, 3]).T
+    return J
+
+
+def gravity_torques(spec: ArmSpec, q, T_world_base, gravity) -> np.ndarray:
+    """(n,) joint torques, N m, that the links' weights exert on the joints at angles ``q`` (n,),
+    rad, with the base at ``T_world_base`` (4, 4) and ``gravity`` (3,), m/s^2, world frame.
+
+    ``tau_j = sum_{i >= j} z . ((c_i - o_j) x m_i g)`` with c_i link i's centre of mass (mid-link)
+    and o_j joint j's position; a motor that applies ``-gravity_torques`` cancels the weights.
+    """
+    T = link_transforms(spec, q, T_world_base)
+    com = T[:, :3, 3] + T[:, :3, 0] * (spec.link_length / 2.0)
+    f = spec.link_mass * np.asarray(gravity, dtype=np.float64)
+    z = T[0, :3, 2]
+    # torque of each link's weight about the world origin, projected on z; the moment about o_j is
+    # that minus o_j x (sum of the distal weights)
+    m_origin = np.cross(com, f) @ z  # (n,)
+    tail_m = np.cumsum(m_origin[::-1])[::-1]  # sum over i >= j
+    count = np.arange(spec.n_links, 0, -1)  # number of links i >= j
+    tail_f = count[:, None] * f[None, :]
+    return tail_m - np.cross(T[:, :3, 3], tail_f) @ z

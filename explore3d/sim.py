@@ -1,12 +1,12 @@
 """One PyBullet world: the arm, optionally a static object, gravity.  A thin stateful wrapper.
 
-:class:`ArmSimulation` owns its own PyBullet DIRECT client (no global client), so several can
-live in one process and in parallel processes.  It holds no geometry logic.
+:class:`ArmSimulation` (the world) owns its own PyBullet DIRECT client (no global client), so
+several can live in one process and in parallel processes.  It holds no geometry logic.
 
-What the exploration may use (see :mod:`explore3d.encircle`): :meth:`set_base` (a known base
-transform), :meth:`reset_joints`, :meth:`step` (send joint references, advance, read joint
-angles) and :attr:`spec`.  Nothing here reports contacts, distances or the object's pose to the
-exploration; the evaluation-only oracle lives in :mod:`explore3d.quality`.
+The exploration never sees the world: it gets a :class:`SimRobot` (:meth:`ArmSimulation.robot`),
+the :class:`~explore3d.robot.Robot` interface of the simulated arm, which reads the joints through
+:mod:`explore3d.sensing` and holds no client.  The world's client (:attr:`ArmSimulation.client`)
+is for the evaluation layer and rendering only.
 
 Quaternions passed to PyBullet are (x, y, z, w).
 """
@@ -20,8 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arm import ArmSpec
+from .robot import JointCommand, JointReading, Robot
+from .sensing import SensorConfig, Sensors
 from .urdf import arm_urdf
-from .kinematics import link_transforms
 
 
 @dataclass(frozen=True)
@@ -78,7 +79,7 @@ class ArmSimulation:
         spec: the arm.
         vertices, faces: the object as a (v, 3) float array (metres, world frame) and (f, 3) int
             array, loaded as a static concave mesh (``GEOM_FORCE_CONCAVE_TRIMESH``, mass 0); or
-            None for free space (used to calibrate the contact band).
+            None for free space.
         config: physics settings.
     """
 
@@ -103,7 +104,6 @@ class ArmSimulation:
         finally:
             os.unlink(path)
         self.joints = list(range(spec.n_links))
-        self.torques = list(spec.joint_torques())
         # Switch off the default velocity motors so POSITION_CONTROL alone drives the joints.
         p.setJointMotorControlArray(self.arm, self.joints, pybullet.VELOCITY_CONTROL, forces=[0.0] * len(self.joints))
         self.object = None
@@ -127,91 +127,76 @@ class ArmSimulation:
         self._step_sim = functools.partial(pybullet.stepSimulation, physicsClientId=cid)
         self._joint_states = functools.partial(pybullet.getJointStates, physicsClientId=cid)
         self._motor_array = functools.partial(pybullet.setJointMotorControlArray, physicsClientId=cid)
-        self._external_force = functools.partial(pybullet.applyExternalForce, physicsClientId=cid)
-        self._q = np.zeros(spec.n_links)
+        self._external_torque = functools.partial(pybullet.applyExternalTorque, physicsClientId=cid)
         self.steps = 0
-        self._q_ref = np.zeros(spec.n_links)
-        self._dq_ref = np.zeros(spec.n_links)
-        self._forces = np.array(self.torques)
+        self._torques = np.array(spec.joint_torques())
+        self._sent = None
+        self._axis = np.array([0.0, 0.0, 1.0])
         self._T_base = np.eye(4)
-        self._g_in_plane = True
         self._state = p.saveState()
 
-    # --- what the exploration may call -------------------------------------------------------
-    def set_base(self, T_world_base) -> None:
-        """Put the arm's base at the known pose ``T_world_base`` (4, 4) and restore the initial
-        physics state, so every wrap starts from the same state whatever ran before."""
+    def robot(self, sensors: SensorConfig = SensorConfig()) -> "SimRobot":
+        """The :class:`~explore3d.robot.Robot` interface of the simulated arm, read through ``sensors``."""
+        return SimRobot(self, sensors)
+
+    # --- the robot's actuators and sensors (used by SimRobot only) --------------------------------
+    def _start(self, T_world_base, q0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Restore the initial physics state (every motion starts from the same state whatever ran
+        before), put the base at ``T_world_base`` and the joints at rest at ``q0``; hold there.
+        Returns the exact (q, dq, tau)."""
         self._p.restoreState(self._state)
         self._T_base = np.asarray(T_world_base, dtype=np.float64).copy()
-        # Gravity along the joint axes (the arm's plane horizontal) loads no joint: nothing to cancel.
-        g = np.asarray(self.config.gravity, dtype=np.float64)
-        self._g_in_plane = float(np.linalg.norm(g - (g @ self._T_base[:3, 2]) * self._T_base[:3, 2])) > 1e-9
+        self._axis = self._T_base[:3, 2].copy()  # every joint axis is the base z axis
         pos, quat = _pose_from_T(T_world_base)
         self._p.resetBasePositionAndOrientation(self.arm, pos, quat)
-        self._q = self.joint_angles()
-
-    def reset_joints(self, q) -> None:
-        """Teleport the joints to angles ``q`` (n,), rad, at rest; references follow."""
-        q = np.asarray(q, dtype=np.float64)
-        for j, qj in zip(self.joints, q):
+        q0 = np.asarray(q0, dtype=np.float64)
+        for j, qj in zip(self.joints, q0):
             self._p.resetJointState(self.arm, j, float(qj), 0.0)
-        self._q = self.joint_angles()
-        self._q_ref = q.copy()
-        self._dq_ref = np.zeros_like(q)
-        self._forces = np.array(self.torques)
-        self._send()
+        self._sent = None
+        n = len(self.joints)
+        self._send(q0, np.zeros(n), self._torques)
+        return q0.copy(), np.zeros(n), np.zeros(n)
 
-    def _send(self) -> None:
+    def _send(self, q_ref, dq_ref, limits) -> None:
         c = self.config
         n = len(self.joints)
         self._motor_array(
-            self.arm, self.joints, self._pc, targetPositions=self._q_ref.tolist(),
-            targetVelocities=self._dq_ref.tolist(), forces=self._forces.tolist(),
-            positionGains=[c.position_gain] * n, velocityGains=[c.velocity_gain] * n,
+            self.arm, self.joints, self._pc, targetPositions=list(q_ref), targetVelocities=list(dq_ref),
+            forces=list(limits), positionGains=[c.position_gain] * n, velocityGains=[c.velocity_gain] * n,
         )
+        self._sent = (np.array(q_ref), np.array(dq_ref), np.array(limits))
 
-    def _compensate_gravity(self) -> None:
-        # Joint torques that cancel the links' weights, tau = sum_i J_i^T (-m_i g), are exactly
-        # the generalised force of an upward force m_i g at each link's centre of mass; PyBullet's
-        # position motors take no feed-forward torque, so the motors' compensation is applied in
-        # that equivalent form.  Computed from the robot's own model: measured joint angles, the
-        # known base pose, link masses and the gravity vector.
-        T = link_transforms(self.spec, self._q, self._T_base)  # the angles measured after the last step
-        com = T[:, :3, 3] + T[:, :3, 0] * (self.spec.link_length / 2.0)
-        f = (-self.spec.link_mass * np.asarray(self.config.gravity, dtype=np.float64)).tolist()
-        for j, c in zip(self.joints, com.tolist()):
-            self._external_force(self.arm, j, f, c, self._world_frame)
+    def _apply_feed_forward(self, tau_ff: np.ndarray) -> None:
+        # PyBullet's position motors take no feed-forward torque.  A motor torque tau_j on joint j
+        # is an internal pair: +tau_j on link j and -tau_j on its parent about the joint axis.  So
+        # link j receives the external torque (tau_j - tau_{j+1}) about the (common) joint axis:
+        # the same generalised forces, exactly.  Cleared by PyBullet after every step.
+        net = tau_ff.copy()
+        net[:-1] -= tau_ff[1:]
+        for j in np.flatnonzero(net):
+            self._external_torque(self.arm, int(j), (net[j] * self._axis).tolist(), self._world_frame)
 
-    def step(self, q_ref, dq_ref=None, forces=None, gravity_compensation: bool = False) -> np.ndarray:
-        """Command references ``q_ref`` (n,), rad, optionally velocity references ``dq_ref`` (n,),
-        rad/s (default 0), and motor torque limits ``forces`` (n,), N m (default: the arm's
-        :meth:`~explore3d.arm.ArmSpec.joint_torques`, clipped to them); advance one timestep;
-        return the measured joint angles (n,), rad.
-
-        ``gravity_compensation``: the motors also cancel the links' weights (computed from the
-        robot's own model, see :meth:`_compensate_gravity`), so the position loop sees no
-        gravity load in any orientation of the arm's plane."""
-        n = len(self.joints)
-        dq = np.zeros(n) if dq_ref is None else dq_ref
-        f = self.torques if forces is None else np.minimum(forces, self.torques)
-        if not (np.array_equal(q_ref, self._q_ref) and np.array_equal(dq, self._dq_ref)
-                and np.array_equal(f, self._forces)):
-            self._q_ref = np.array(q_ref, dtype=np.float64)
-            self._dq_ref = np.array(dq, dtype=np.float64)
-            self._forces = np.array(f, dtype=np.float64)
-            self._send()
-        if gravity_compensation and self._g_in_plane:
-            self._compensate_gravity()
+    def _step(self, command: JointCommand) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Send ``command``, advance one timestep; return the exact joint angles (n,), rad, velocities
+        (n,), rad/s, and motor torques (n,), N m (the position loop's plus the feed-forward)."""
+        limits = np.minimum(command.torque_limit, self._torques)
+        s = self._sent
+        if s is None or not (np.array_equal(command.q_ref, s[0]) and np.array_equal(command.dq_ref, s[1])
+                             and np.array_equal(limits, s[2])):
+            self._send(command.q_ref, command.dq_ref, limits)
+        tau_ff = np.asarray(command.tau_ff, dtype=np.float64)
+        if tau_ff.any():
+            self._apply_feed_forward(tau_ff)
         self._step_sim()
         self.steps += 1
-        return self.joint_angles()
+        st = self._joint_states(self.arm, self.joints)
+        n = len(self.joints)
+        q = np.fromiter((x[0] for x in st), float, n)
+        dq = np.fromiter((x[1] for x in st), float, n)
+        tau = np.fromiter((x[3] for x in st), float, n) + tau_ff
+        return q, dq, tau
 
-    def joint_angles(self) -> np.ndarray:
-        """Measured joint angles (n,), rad."""
-        self._q = np.fromiter((s[0] for s in self._joint_states(self.arm, self.joints)), float, len(self.joints))
-        return self._q.copy()
-
-    # --- evaluation only (oracle); never called by the exploration ---------------------------
+    # --- evaluation only (oracle); never handed to the exploration ---------------------------------
     @property
     def client(self):
         """The underlying PyBullet client (evaluation and rendering only)."""
@@ -228,3 +213,41 @@ class ArmSimulation:
 
     def __exit__(self, *exc):
         self.close()
+
+
+class SimRobot(Robot):
+    """The simulated arm behind the :class:`~explore3d.robot.Robot` door: commands go to the
+    world's motors, readings come back through :class:`~explore3d.sensing.Sensors`.
+
+    It keeps only closures over the world's actuator and sensor calls (no client, no object, no
+    world query); ``reseed(key)`` seeds the sensor noise (per wrap)."""
+
+    def __init__(self, world: ArmSimulation, sensors: SensorConfig = SensorConfig()):
+        self.spec = world.spec
+        self.dt = float(world.config.timestep)
+        self.gravity = np.asarray(world.config.gravity, dtype=np.float64)
+        self.sensors = sensors
+        self._sense = Sensors(sensors)
+        self._actuate_start = world._start
+        self._actuate_step = world._step
+        self._base = np.eye(4)
+        self._k = 0
+
+    def reseed(self, key) -> None:
+        """Seed the sensor noise with ``(sensors.seed, *key)``."""
+        self._sense.reseed(key)
+
+    @property
+    def base_pose(self) -> np.ndarray:
+        return self._base.copy()
+
+    def start(self, T_world_base, q0) -> JointReading:
+        self._base = np.asarray(T_world_base, dtype=np.float64).copy()
+        self._k = 0
+        q, dq, tau = self._sense.restart(*self._actuate_start(T_world_base, q0))
+        return JointReading(t_s=0.0, q=q, dq=dq, tau=tau)
+
+    def step(self, command: JointCommand) -> JointReading:
+        q, dq, tau = self._sense.measure(*self._actuate_step(command))
+        self._k += 1
+        return JointReading(t_s=self._k * self.dt, q=q, dq=dq, tau=tau)

@@ -1,0 +1,242 @@
+"""Calibrating the contact detector: every joint's band from measurement.
+
+:func:`calibrate_band` measures, for one arm, controller, physics and sensing setting, how large
+the detector's signals (:mod:`explore3d.detect`) get when nothing new is touched:
+
+1. **Free motion.**  Every joint k sweeps alone, from the straight arm to its limit (the motion
+   of its sweep in an attempt, with the longest and heaviest distal chain), in the base
+   orientations that bound gravity's effect: the arm's plane horizontal (gravity along the joint
+   axes), and vertical with the curl upwards and downwards (gravity in the plane; a sweep then
+   passes through every angle to gravity).  Planar explorations use the horizontal plane only.
+   Sensing is the run's own (noise, quantisation, delay).
+2. **Impacts** on a known calibration object (the 60 mm ball of
+   :func:`explore3d.calibration.calibration_sphere`, never the object under test): full attempts
+   from a few wrap poses around it.  A link held against the ball, or struck by it, shakes the rest
+   of the chain; a sweep step counts as *contact-free* when, by the arm's own model at the sensed
+   angles, the swept link and every distal link are farther than :func:`contact_tolerance_m` from
+   the known ball.  The signals of contact-free steps are what an impact does to the other joints.
+   A detection at a contact-free step is a false detection on the ball; the bands are raised to
+   cover the measured signals and the wraps repeated until none is left (at most
+   :data:`MAX_IMPACT_ROUNDS` rounds).
+
+The band of each joint is ``ControlConfig.band_factor`` times the largest contact-free signal
+measured in 1 and 2.  The result is cached once per setting, in memory and on disk
+(``$EXPLORE3D_CACHE_DIR``, default ``~/.cache/explore3d``), so a run pays for it at most once.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import json
+import logging
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .arm import ArmSpec
+from .detect import ContactBand, SweepDetector
+from .encircle import Controller, ControlConfig, StopReason, run_attempt, sweep_joint, sweep_speeds, sweep_torque_limits
+from .kinematics import link_transforms
+from .sensing import SensorConfig
+from .sim import ArmSimulation, SimConfig
+
+__all__ = ["calibrate_band", "cached_band", "contact_tolerance_m", "box_sphere_distance", "BAND_PROTOCOL_VERSION",
+           "MAX_IMPACT_ROUNDS", "gravity_bounding_bases"]
+
+log = logging.getLogger(__name__)
+
+#: Bumped whenever the calibration procedure changes (old cache entries are then ignored).
+BAND_PROTOCOL_VERSION = 1
+
+#: Rounds of impact wraps on the calibration ball at most (each raises the bands to what the
+#: previous one measured; measured: the default arm needs at most 2).
+MAX_IMPACT_ROUNDS = 4
+
+#: Wrap poses of the impact phase: 3D, plane normals through the ball's centre (one approach each).
+IMPACT_NORMALS_3D = 6
+#: Planar: approach directions.
+IMPACT_DIRECTIONS_PLANAR = 3
+
+
+def gravity_bounding_bases() -> list[np.ndarray]:
+    """The (4, 4) base orientations of the free-motion calibration: the arm's plane horizontal,
+    vertical curling upwards (base +y up), vertical curling downwards."""
+    up, down = np.eye(4), np.eye(4)
+    up[:3, :3] = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
+    down[:3, :3] = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
+    return [np.eye(4), up, down]
+
+
+def box_sphere_distance(spec: ArmSpec, T_world_link, centre, radius: float) -> np.ndarray:
+    """(m,) distance, metres, from each link box (frames ``T_world_link`` (m, 4, 4)) to a sphere
+    (centre (3,), world frame, and radius, metres); negative inside."""
+    T = np.asarray(T_world_link, dtype=np.float64).reshape(-1, 4, 4)
+    c = np.asarray(centre, dtype=np.float64)
+    local = np.einsum("mji,mj->mi", T[:, :3, :3], c[None, :] - T[:, :3, 3])  # R^T (c - o)
+    lo = np.array([0.0, -spec.link_width / 2, -spec.link_height / 2])
+    hi = np.array([spec.link_length, spec.link_width / 2, spec.link_height / 2])
+    nearest = np.clip(local, lo, hi)
+    return np.linalg.norm(local - nearest, axis=1) - radius
+
+
+def contact_tolerance_m(spec: ArmSpec, control: ControlConfig, sim: SimConfig, sensors: SensorConfig) -> float:
+    """How far, metres, a link may be from the known ball by the model at the sensed angles and
+    still be touching it: the contact margin (PyBullet's default ~1 mm when
+    ``SimConfig.collision_margin`` is None), plus how far the tip moves during the sensing delay
+    and one step, plus the tip's position error from the encoder resolution (random errors of
+    n joints, sqrt(n) counts, over the reach)."""
+    margin = 1.0e-3 if sim.collision_margin is None else max(sim.collision_margin, 1.0e-4)
+    reach = spec.link_length * (spec.n_links - np.arange(spec.n_links))
+    tip_speed = float(np.max(sweep_speeds(spec, control) * reach))
+    moving = (sensors.delay_steps + 1) * sim.timestep * tip_speed
+    quant = spec.reach * sensors.angle_resolution_rad * math.sqrt(spec.n_links)
+    return margin + moving + quant
+
+
+class _Maxima:
+    """Running per-joint maxima of the contact-free signals."""
+
+    def __init__(self, n: int):
+        self.swept = np.zeros(n)
+        self.other = np.zeros(n)
+
+    def add(self, k: int, lag: float, sig) -> None:
+        self.swept[k] = max(self.swept[k], lag)
+        np.maximum(self.other, np.abs(sig), out=self.other)
+
+    def band(self, factor: float, provenance: dict | None = None) -> ContactBand:
+        return ContactBand(swept=factor * self.swept, other=factor * self.other, provenance=provenance or {})
+
+
+def _free_motion(robot, spec: ArmSpec, control: ControlConfig, bases) -> _Maxima:
+    mx = _Maxima(spec.n_links)
+    upper = spec.joint_upper - control.limit_margin
+    speeds, torques = sweep_speeds(spec, control), sweep_torque_limits(spec, control)
+    observe = lambda k, reading, lag, sig: mx.add(k, lag, sig)
+    for T in bases:
+        for k in range(spec.n_links):
+            ctl = Controller(robot, control, T, record=False)
+            ctl.start()
+            ctl.hold(np.zeros(spec.n_links))
+            reason = sweep_joint(ctl, k, np.zeros(spec.n_links), upper, None, speeds[k], torques[k], observer=observe)
+            if reason is not StopReason.LIMIT:
+                raise RuntimeError(f"band calibration: joint {k}'s free sweep ended by {reason.value}, not at its limit")
+    return mx
+
+
+def _impact_poses(spec: ArmSpec, centre, radius: float, planar: bool):
+    from .directions import planar_wrap_poses, spatial_wrap_poses
+
+    r = 1.05 * radius
+    if planar:
+        return planar_wrap_poses(centre, r, spec.link_width, IMPACT_DIRECTIONS_PLANAR)
+    return spatial_wrap_poses(centre, r, spec.link_width, IMPACT_NORMALS_3D, 1, 1)
+
+
+def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim: SimConfig = SimConfig(),
+                   sensors: SensorConfig = SensorConfig(), planar: bool = False) -> ContactBand:
+    """Measure the contact band of every joint (see the module docstring).  Takes seconds to a
+    minute of simulation; use :func:`cached_band`.  ``band.provenance`` records the free-motion and
+    impact maxima per joint, the rounds, the false detections on the ball per round and the cost."""
+    from .calibration import CALIBRATION_SPHERE_RADIUS_M, calibration_sphere
+
+    t0 = time.perf_counter()
+    n = spec.n_links
+    bases = [np.eye(4)] if planar else gravity_bounding_bases()
+    with ArmSimulation(spec, config=sim) as world:
+        robot = world.robot(sensors)
+        robot.reseed((1,))  # streams: (0, wrap) exploration, (1,) free motion, (2, round, wrap) impacts
+        free = _free_motion(robot, spec, control, bases)
+    steps = 0
+    ball = calibration_sphere()
+    centre, radius = np.zeros(3), CALIBRATION_SPHERE_RADIUS_M
+    tol = contact_tolerance_m(spec, control, sim, sensors)
+    impact = _Maxima(n)
+    rounds = []
+    with ArmSimulation(spec, ball.vertices, ball.faces, sim) as world:
+        robot = world.robot(sensors)
+        poses = _impact_poses(spec, centre, radius, planar)
+        for r in range(MAX_IMPACT_ROUNDS):
+            band = _Maxima(n)
+            band.swept, band.other = np.maximum(free.swept, impact.swept), np.maximum(free.other, impact.other)
+            band = band.band(control.band_factor)
+            false = [0]
+
+            def observe(k, reading, lag, sig):
+                Tl = link_transforms(spec, reading.q, observe.T)[k:]
+                if box_sphere_distance(spec, Tl, centre, radius).min() > tol:
+                    impact.add(k, lag, sig)
+                    false[0] += SweepDetector.exceeds(band, k, lag, sig)
+
+            n_contacts = 0
+            for i, pose in enumerate(poses):
+                robot.reseed((2, r, i))
+                observe.T = pose.T_world_base
+                att = run_attempt(robot, pose.T_world_base, band, control, observer=observe)
+                n_contacts += int(att.contact.sum())
+                steps += att.steps
+            rounds.append({"false_detections": false[0], "contacts": n_contacts})
+            if false[0] == 0:
+                break
+    swept = np.maximum(free.swept, impact.swept)
+    other = np.maximum(free.other, impact.other)
+    prov = {
+        "protocol_version": BAND_PROTOCOL_VERSION,
+        "rule": "band_factor x the largest contact-free signal (free motion of every joint in the base orientations "
+                "bounding gravity; contact-free sweep steps of attempts on the known 60 mm ball)",
+        "band_factor": control.band_factor,
+        "free_motion_bases": len(bases),
+        "free_swept_max_rad": free.swept.tolist(), "free_other_max_rad": free.other.tolist(),
+        "impact_swept_max_rad": impact.swept.tolist(), "impact_other_max_rad": impact.other.tolist(),
+        "impact_wraps": len(poses), "impact_rounds": rounds, "contact_tolerance_m": tol,
+        "calibration_object": f"sphere r={radius * 1000:.0f} mm at the origin",
+        "wall_s": time.perf_counter() - t0,
+    }
+    if rounds and rounds[-1]["false_detections"]:
+        log.warning("band calibration: %d false detections on the calibration ball after %d rounds",
+                    rounds[-1]["false_detections"], len(rounds))
+    return ContactBand(swept=control.band_factor * swept, other=control.band_factor * other, provenance=prov)
+
+
+def _cache_dir() -> Path:
+    env = os.environ.get("EXPLORE3D_CACHE_DIR")
+    if env:
+        return Path(env)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "explore3d"
+
+
+def band_cache_key(spec: ArmSpec, control: ControlConfig, sim: SimConfig, sensors: SensorConfig, planar: bool) -> str:
+    """The hash naming a setting's cached band (everything the calibration depends on)."""
+    from . import __version__
+
+    blob = json.dumps({"protocol": BAND_PROTOCOL_VERSION, "version": __version__, "spec": dataclasses.asdict(spec),
+                       "control": dataclasses.asdict(control), "sim": dataclasses.asdict(sim),
+                       "sensors": dataclasses.asdict(sensors), "planar": bool(planar)}, sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:24]
+
+
+@functools.lru_cache(maxsize=16)
+def cached_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim: SimConfig = SimConfig(),
+                sensors: SensorConfig = SensorConfig(), planar: bool = False) -> ContactBand:
+    """:func:`calibrate_band`, computed once per setting: from memory, else from the disk cache,
+    else measured and stored there (``provenance["cache"]`` says which)."""
+    from .io import atomic_write_text
+
+    key = band_cache_key(spec, control, sim, sensors, planar)
+    path = _cache_dir() / "bands" / f"{key}.json"
+    try:
+        band = ContactBand.from_dict(json.loads(path.read_text()))
+        if len(band.swept) == spec.n_links:
+            return dataclasses.replace(band, provenance={**band.provenance, "cache": str(path)})
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    band = calibrate_band(spec, control, sim, sensors, planar)
+    try:
+        atomic_write_text(path, json.dumps(band.to_dict(), indent=1) + "\n")
+    except OSError as exc:
+        log.info("band calibration not cached (%s)", exc)
+    return dataclasses.replace(band, provenance={**band.provenance, "cache": "computed"})
