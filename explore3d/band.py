@@ -53,8 +53,14 @@ log = logging.getLogger(__name__)
 BAND_PROTOCOL_VERSION = 1
 
 #: Rounds of impact wraps on the calibration ball at most (each raises the bands to what the
-#: previous one measured; measured: the default arm needs at most 2).
-MAX_IMPACT_ROUNDS = 4
+#: previous ones measured).
+MAX_IMPACT_ROUNDS = 6
+
+#: The impact rounds stop once false detections on the ball are at most this fraction of its
+#: detections.  The contact-free signals near held contacts have a long tail (measured on a
+#: 16-link arm: each round's new maximum 3-30% above the last), so "none" is never reached; the
+#: target is a stated false-alarm rate, the way a detector threshold is set, not a margin.
+FALSE_RATE_TARGET = 0.02
 
 #: Wrap poses of the impact phase: 3D, plane normals through the ball's centre (one approach each).
 IMPACT_NORMALS_3D = 6
@@ -98,13 +104,16 @@ def contact_tolerance_m(spec: ArmSpec, control: ControlConfig, sim: SimConfig, s
 
 
 class _Maxima:
-    """Running per-joint maxima of the contact-free signals."""
+    """Running per-joint maxima of the contact-free signals (and how many steps of each joint's
+    sweeps were seen)."""
 
     def __init__(self, n: int):
         self.swept = np.zeros(n)
         self.other = np.zeros(n)
+        self.steps = np.zeros(n, dtype=int)
 
     def add(self, k: int, lag: float, sig) -> None:
+        self.steps[k] += 1
         self.swept[k] = max(self.swept[k], lag)
         np.maximum(self.other, np.abs(sig), out=self.other)
 
@@ -180,7 +189,7 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
                 n_contacts += int(att.contact.sum())
                 steps += att.steps
             rounds.append({"false_detections": false[0], "contacts": n_contacts})
-            if false[0] == 0:
+            if false[0] <= FALSE_RATE_TARGET * max(n_contacts, 1):
                 break
     swept = np.maximum(free.swept, impact.swept)
     other = np.maximum(free.other, impact.other)
@@ -191,14 +200,16 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
         "band_factor": control.band_factor,
         "free_motion_bases": len(bases),
         "free_swept_max_rad": free.swept.tolist(), "free_other_max_rad": free.other.tolist(),
+        "free_sweep_steps": free.steps.tolist(), "impact_contact_free_steps": impact.steps.tolist(),
         "impact_swept_max_rad": impact.swept.tolist(), "impact_other_max_rad": impact.other.tolist(),
-        "impact_wraps": len(poses), "impact_rounds": rounds, "contact_tolerance_m": tol,
+        "impact_wraps": len(poses), "impact_rounds": rounds, "false_rate_target": FALSE_RATE_TARGET, "contact_tolerance_m": tol,
         "calibration_object": f"sphere r={radius * 1000:.0f} mm at the origin",
         "wall_s": time.perf_counter() - t0,
     }
-    if rounds and rounds[-1]["false_detections"]:
-        log.warning("band calibration: %d false detections on the calibration ball after %d rounds",
-                    rounds[-1]["false_detections"], len(rounds))
+    last = rounds[-1]
+    if last["false_detections"] > FALSE_RATE_TARGET * max(last["contacts"], 1):
+        log.warning("band calibration: %d false detections of %d on the calibration ball after %d rounds",
+                    last["false_detections"], last["contacts"], len(rounds))
     return ContactBand(swept=control.band_factor * swept, other=control.band_factor * other, provenance=prov)
 
 

@@ -1,0 +1,260 @@
+"""The robot interface: what passes through the door, realistic sensing, logs that replay, and
+proof that the exploration cannot see the world."""
+import dataclasses
+import json
+import os
+import re
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pybullet
+import pytest
+
+from explore3d.arm import ArmSpec
+from explore3d.band import cached_band
+from explore3d.encircle import ControlConfig, run_wrap
+from explore3d.kinematics import gravity_torques, link_transforms, point_jacobian
+from explore3d.objects import cube
+from explore3d.robot import LogMismatchError, LogRobot, RecordingRobot, Robot, RobotLog, make_command
+from explore3d.sensing import SensorConfig
+from explore3d.sim import ArmSimulation, SimRobot
+
+SMALL = ArmSpec(name="small12", n_links=12, link_length=0.025)
+ROOT = Path(__file__).resolve().parents[1]
+
+#: The PyBullet calls that read the world rather than the arm's own joints.
+WORLD_QUERIES = ("getContactPoints", "getClosestPoints", "rayTest", "rayTestBatch", "getLinkState", "getLinkStates",
+                 "getBasePositionAndOrientation", "getBaseVelocity", "getAABB", "getOverlappingObjects")
+
+#: Modules of the evaluation layer (truth and oracle), the only ones allowed to name them.
+EVALUATION_MODULES = {"quality.py", "calibration.py", "pictures.py"}
+
+
+def _vertical_base():
+    T = np.eye(4)
+    T[:3, :3] = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
+    T[:3, 3] = [0.1, -0.2, 0.3]
+    return T
+
+
+def _walk(obj, seen=None):
+    """Every object reachable from ``obj`` through attributes and containers (not into functions)."""
+    seen = set() if seen is None else seen
+    if id(obj) in seen or isinstance(obj, (int, float, str, bool, type(None), np.ndarray, np.generic)):
+        return
+    seen.add(id(obj))
+    yield obj
+    items = obj.values() if isinstance(obj, dict) else obj if isinstance(obj, (list, tuple, set)) else \
+        vars(obj).values() if hasattr(obj, "__dict__") and not callable(obj) else ()
+    for v in items:
+        yield from _walk(v, seen)
+
+
+def test_the_robot_exposes_no_client_or_pybullet_handle():
+    from pybullet_utils.bullet_client import BulletClient
+
+    with ArmSimulation(SMALL, cube().vertices, cube().faces) as world:
+        robot = world.robot()
+        assert isinstance(robot, Robot)
+        public = {n for n in dir(robot) if not n.startswith("_")}
+        assert public <= {"spec", "dt", "gravity", "sensors", "base_pose", "start", "step", "reseed"}, public
+        for o in _walk(robot):
+            assert not isinstance(o, (BulletClient, ArmSimulation)), type(o)
+            assert o is not pybullet
+        for name, v in vars(robot).items():
+            assert "client" not in name and not isinstance(v, BulletClient)
+
+
+def test_jacobian_and_gravity_torques_match_pybullet():
+    """The model the robot knows (numpy) against PyBullet: its Jacobian (reported in the base frame)
+    and the torques its motors apply to hold the arm still (PyBullet's calculateInverseDynamics
+    ignores a fixed base's orientation, so the static hold is the reference)."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(3)
+    for seed in range(3):
+        T = np.eye(4)
+        T[:3, :3] = Rotation.random(random_state=seed).as_matrix()
+        T[:3, 3] = [0.1, -0.2, 0.3]
+        q = rng.uniform(-0.5, 2.0, SMALL.n_links)
+        with ArmSimulation(SMALL) as world:
+            p, arm, n = world.client, world.arm, SMALL.n_links
+            p.resetBasePositionAndOrientation(arm, T[:3, 3].tolist(), Rotation.from_matrix(T[:3, :3]).as_quat().tolist())
+            for j in range(n):
+                p.resetJointState(arm, j, q[j], 0.0)
+            link, local = 7, np.array([0.01, 0.004, -0.003])
+            J_base, _ = p.calculateJacobian(arm, link, local.tolist(), q.tolist(), [0.0] * n, [0.0] * n)
+            assert np.allclose(T[:3, :3] @ np.array(J_base), point_jacobian(SMALL, q, link, local, T), atol=1e-12)
+            p.setJointMotorControlArray(arm, list(range(n)), pybullet.POSITION_CONTROL, targetPositions=q.tolist(),
+                                        forces=[50.0] * n)
+            for _ in range(200):
+                p.stepSimulation()
+            held = np.array([s[3] for s in p.getJointStates(arm, list(range(n)))])
+        g = gravity_torques(SMALL, q, T, (0, 0, -9.81))
+        assert np.abs(g).max() > 0.005
+        assert np.allclose(held, -g, atol=1e-5), held + g
+
+
+def test_gravity_feed_forward_holds_the_arm_and_is_reported_as_motor_torque():
+    """Straight arm held horizontal in a vertical plane: with the model's feed-forward the position
+    loop carries nothing; the reported torque is the feed-forward, -gravity torques."""
+    T = _vertical_base()
+    q0 = np.zeros(SMALL.n_links)
+    g = -gravity_torques(SMALL, q0, T, (0, 0, -9.81))
+    assert np.abs(g).max() > 0.01
+    with ArmSimulation(SMALL) as world:
+        for ff, name in ((g, "feed-forward"), (np.zeros_like(g), "position loop alone")):
+            robot = world.robot(SensorConfig.ideal())
+            robot.start(T, q0)
+            for _ in range(60):
+                r = robot.step(make_command(SMALL, q0, tau_ff=ff))
+            assert np.allclose(r.tau, g, atol=2e-3 if name == "feed-forward" else 0.05), (name, r.tau - g)
+            if name == "feed-forward":
+                assert np.abs(r.q).max() < 1e-6, r.q
+
+
+def test_sensing_quantises_delays_and_seeds():
+    cfg = SensorConfig()
+    res = cfg.angle_resolution_rad
+    assert res == pytest.approx(2 * np.pi / 4096)
+    T = np.eye(4)
+    cmds = [make_command(SMALL, np.r_[0.02 * i, np.zeros(SMALL.n_links - 1)]) for i in range(1, 30)]
+    with ArmSimulation(SMALL) as world:
+        def run(sensors, key=(0,)):
+            robot = world.robot(sensors)
+            robot.reseed(key)
+            robot.start(T, np.zeros(SMALL.n_links))
+            return [robot.step(c) for c in cmds]
+
+        exact = run(SensorConfig.ideal())
+        late = run(dataclasses.replace(SensorConfig.ideal(), delay_steps=1))
+        real_a, real_b, real_c = run(cfg), run(cfg), run(cfg, key=(1,))
+    for t in range(1, len(cmds)):
+        assert np.array_equal(late[t].q, exact[t - 1].q) and np.array_equal(late[t].tau, exact[t - 1].tau)
+    Q = np.array([r.q for r in real_a])
+    assert np.allclose(Q / res, np.round(Q / res), atol=1e-9)
+    tau = np.array([r.tau for r in real_a])
+    assert np.allclose(tau / 1e-3, np.round(tau / 1e-3), atol=1e-6)
+    assert all(np.array_equal(a.tau, b.tau) for a, b in zip(real_a, real_b))  # same seed: same readings
+    assert any(not np.array_equal(a.tau, c.tau) for a, c in zip(real_a, real_c))  # another wrap: other noise
+    assert np.abs(Q[1:] - np.array([r.q for r in exact])[:-1]).max() <= res / 2 + 1e-12
+
+
+@pytest.mark.parametrize("bad", [dict(encoder_counts_per_turn=-1), dict(torque_noise_nm=float("nan")),
+                                 dict(delay_steps=1.5), dict(velocity_resolution_rad_s=-0.1)])
+def test_sensor_config_rejects_bad_values(bad):
+    with pytest.raises(ValueError, match="SensorConfig"):
+        SensorConfig(**bad)
+
+
+def test_a_recorded_log_replays_to_the_same_detections(tmp_path):
+    """A simulated wrap recorded through the door, saved, loaded and played back through LogRobot:
+    the controller takes the same decisions (a real robot's log in this format works the same way)."""
+    band = cached_band(SMALL, planar=True)
+    m = cube()
+    from explore3d.explore import ExploreConfig, wrap_poses, rough_bound
+
+    c, r = rough_bound(m.vertices)
+    pose = wrap_poses(SMALL, ExploreConfig(mode="planar", directions=1), c, r)[0]
+    with ArmSimulation(SMALL, m.vertices, m.faces) as world:
+        sim_robot = world.robot()
+        sim_robot.reseed((0, 0))
+        rec = RecordingRobot(sim_robot)
+        live = run_wrap(rec, pose.T_world_base, band, attempts=2)
+    assert sum(a.contact.sum() for a in live) > 0
+    path = rec.log().save(tmp_path / "wrap.npz")
+    log = RobotLog.load(path)
+    assert log.n_motions == len(live) and log.n_steps == sum(a.steps for a in live) + len(live)
+    player = LogRobot(log)
+    replayed = run_wrap(player, pose.T_world_base, band, attempts=2)
+    assert player.finished
+    for a, b in zip(live, replayed):
+        assert np.array_equal(a.q, b.q) and np.array_equal(a.contact, b.contact) and a.reasons == b.reasons
+    # a controller that does something else is told so
+    with pytest.raises(LogMismatchError, match="q_ref"):
+        run_wrap(LogRobot(log), pose.T_world_base, band, attempts=2, cfg=ControlConfig(speed=2.0))
+
+
+def test_a_bad_log_file_is_a_one_line_error(tmp_path):
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, q=np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="lacks") as e:
+        RobotLog.load(bad)
+    assert "\n" not in str(e.value)
+    with pytest.raises(ValueError, match="does not exist"):
+        RobotLog.load(tmp_path / "missing.npz")
+
+
+def test_band_is_measured_for_every_joint_and_cached(tmp_path, monkeypatch):
+    from explore3d import band as band_mod
+
+    monkeypatch.setenv("EXPLORE3D_CACHE_DIR", str(tmp_path))
+    arm = ArmSpec(name="tiny8", n_links=8, link_length=0.03)
+    cached_band.cache_clear()
+    b1 = cached_band(arm, planar=True)
+    files = list((tmp_path / "bands").glob("*.json"))
+    assert len(files) == 1 and b1.provenance["cache"] == "computed"
+    prov = b1.provenance
+    # free motion covers every joint (no stop at max_curl), and the band is band_factor x the measured maxima
+    free_steps = np.array(prov["free_sweep_steps"])
+    assert free_steps.shape == (arm.n_links,) and (free_steps > 0).all()
+    # every joint swept 0 -> its limit: the slowest (proximal) joints take the most steps
+    assert free_steps[0] == free_steps.max()
+    meas = np.maximum(prov["free_swept_max_rad"], prov["impact_swept_max_rad"])
+    assert np.allclose(b1.swept, ControlConfig().band_factor * meas)
+    assert prov["impact_rounds"] and prov["impact_wraps"] > 0
+    cached_band.cache_clear()
+    calls = []
+    monkeypatch.setattr(band_mod, "calibrate_band", lambda *a, **k: calls.append(a))
+    b2 = cached_band(arm, planar=True)
+    assert not calls and np.array_equal(b1.swept, b2.swept) and np.array_equal(b1.other, b2.other)
+    cached_band.cache_clear()
+
+
+ORACLE_FREE = textwrap.dedent("""
+    import sys, pybullet
+    names = {names!r}
+    for n in names:
+        if hasattr(pybullet, n):
+            delattr(pybullet, n)
+    assert not any(hasattr(pybullet, n) for n in names)
+    import numpy as np
+    from explore3d.arm import ArmSpec
+    from explore3d.explore import ExploreConfig
+    from explore3d.objects import cube
+    from explore3d.pipeline import run
+    arm = ArmSpec(name="small12", n_links=12, link_length=0.025)
+    res = run(cube(), arm, ExploreConfig(directions=3, angles=1, jobs=2, record=True))
+    ex = res.exploration
+    assert ex.n_contacts > 0 and ex.config.control.gravity_compensation and ex.logs is not None
+    # the wraps' planes are tilted: gravity compensation actually ran (non-zero feed-forward)
+    assert max(np.abs(l.tau_ff).max() for l in ex.logs) > 0
+    print("ORACLE-FREE-OK", ex.n_contacts, round(res.error.percent, 2))
+""")
+
+
+def test_exploration_runs_with_every_world_query_removed_from_pybullet(tmp_path):
+    """The world queries are deleted from the pybullet module *before* explore3d is imported, so no
+    alias bound at import time escapes; a 3D exploration with gravity compensation, two worker
+    processes and the reconstruction runs in that process and its workers."""
+    env = {**os.environ, "EXPLORE3D_CACHE_DIR": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", ORACLE_FREE.format(names=WORLD_QUERIES)], capture_output=True,
+                         text=True, env=env, cwd=tmp_path, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "ORACLE-FREE-OK" in out.stdout
+
+
+def test_no_module_outside_the_evaluation_layer_names_a_world_query():
+    pattern = re.compile("|".join(WORLD_QUERIES))
+    offenders = []
+    for path in sorted((ROOT / "explore3d").rglob("*.py")):
+        rel = path.relative_to(ROOT / "explore3d")
+        if rel.parts[0] in EVALUATION_MODULES or rel.parts[0] == "evaluation":
+            continue
+        for i, line in enumerate(path.read_text().splitlines(), 1):
+            if pattern.search(line):
+                offenders.append(f"{rel}:{i}: {line.strip()}")
+    assert not offenders, offenders
