@@ -12,64 +12,48 @@ import time
 import numpy as np
 
 from explore3d import ArmSpec, ExploreConfig, load_arm, load_object, run
-from explore3d.encircle import ControlConfig, calibrate_band, run_wrap
+from explore3d.band import cached_band
+from explore3d.encircle import ControlConfig, run_wrap
 from explore3d.explore import planar_wrap_poses, rough_bound
+from explore3d.robot import JointCommand, RecordingRobot
 from explore3d.sim import ArmSimulation
 
 
 def bench_wrap(spec, attempts=1, repeats=5):
     """Wall time of one planar wrap around the cube, and a fair bare baseline: the same physics
-    steps replayed with the same motor commands (so the same contacts) and nothing else."""
+    steps replayed with the same motor commands (so the same contacts), the world's own actuation
+    and joint-state calls, and nothing else (no controller, detector or sensing)."""
     cube = load_object("cube")
     c, R = rough_bound(cube.vertices)
     pose = planar_wrap_poses(c, R, spec.link_width, 1)[0]
     ctl = ControlConfig()
-    band = calibrate_band(spec, ctl, base_transforms=[np.eye(4)])
-    with ArmSimulation(spec, cube.vertices, cube.faces) as sim:
+    band = cached_band(spec, ctl, planar=True)
+    with ArmSimulation(spec, cube.vertices, cube.faces) as world:
+        robot = world.robot()
         walls, steps = [], []
         for _ in range(repeats):
-            s0 = sim.steps
+            s0 = world.steps
             t0 = time.perf_counter()
-            run_wrap(sim, pose.T_world_base, band, attempts=attempts, cfg=ctl)
+            run_wrap(robot, pose.T_world_base, band, attempts=attempts, cfg=ctl)
             walls.append(time.perf_counter() - t0)
-            steps.append(sim.steps - s0)
-        # Record the commands of one more identical wrap, then replay them with bare PyBullet calls.
-        cmds = []
-        orig = sim.step
-
-        def recording_step(q_ref, dq_ref=None, forces=None, gravity_compensation=False):
-            q = orig(q_ref, dq_ref, forces, gravity_compensation)
-            cmds.append((sim._q_ref.tolist(), sim._dq_ref.tolist(), sim._forces.tolist()))
-            return q
-
-        sim.step = recording_step
-        starts = []
-        orig_set_base = sim.set_base
-
-        def recording_set_base(T):
-            starts.append(len(cmds))
-            orig_set_base(T)
-
-        sim.set_base = recording_set_base
-        run_wrap(sim, pose.T_world_base, band, attempts=attempts, cfg=ctl)
-        sim.step, sim.set_base = orig, orig_set_base
-        # the raw pybullet functions bound to the client: the cheapest way to issue the same calls
-        motor, step, arm, joints, pc = sim._motor_array, sim._step_sim, sim.arm, sim.joints, sim._pc
-        n = len(joints)
-        kp, kd = [sim.config.position_gain] * n, [sim.config.velocity_gain] * n
+            steps.append(world.steps - s0)
+        # Record the commands of one more identical wrap through the robot interface, then replay them.
+        rec = RecordingRobot(robot)
+        run_wrap(rec, pose.T_world_base, band, attempts=attempts, cfg=ctl)
+        log = rec.log()
+        starts = set(log.start_index.tolist())
+        cmds = [JointCommand(log.q_ref[i], log.dq_ref[i], log.torque_limit[i], log.tau_ff[i]) for i in range(log.n_steps)]
         t0 = time.perf_counter()
-        for i, (q, dq, f) in enumerate(cmds):
+        for i, cmd in enumerate(cmds):
             if i in starts:
-                sim.set_base(pose.T_world_base)
-                sim.reset_joints(np.zeros(n))
-            motor(arm, joints, pc, targetPositions=q, targetVelocities=dq, forces=f, positionGains=kp,
-                  velocityGains=kd)
-            step()
-        bare = len(cmds) / (time.perf_counter() - t0)
+                world._start(pose.T_world_base, log.start_q[0])
+            else:
+                world._step(cmd)
+        bare = (len(cmds) - len(starts)) / (time.perf_counter() - t0)
     wall = float(np.median(walls))
     sps = steps[0] / wall
     return dict(arm=spec.name, links=spec.n_links, attempts=attempts, wall_per_wrap_s=wall, steps=steps[0],
-                steps_per_s=sps, realtime_factor=steps[0] * sim.config.timestep / wall, bare_steps_per_s=bare,
+                steps_per_s=sps, realtime_factor=steps[0] * world.config.timestep / wall, bare_steps_per_s=bare,
                 loop_overhead=bare / sps - 1.0)
 
 

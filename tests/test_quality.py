@@ -152,8 +152,7 @@ def test_pybullet_mesh_margin_is_what_the_constant_says(cube_sdf):
     mesh = load_object("cube")
     with ArmSimulation(SPEC, mesh.vertices, mesh.faces) as sim:
         for g in (0.005, 0.002, 0.0005, -0.0005):
-            sim.set_base(straight_beside_cube(g))
-            sim.reset_joints(np.zeros(SPEC.n_links))
+            sim.robot().start(straight_beside_cube(g), np.zeros(SPEC.n_links))
             sim.client.performCollisionDetection()
             d = {}
             for c in sim.client.getClosestPoints(sim.arm, sim.object, 0.05):
