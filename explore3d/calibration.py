@@ -1,7 +1,7 @@
 """Contact-thickness calibration on a known object, the way a real arm would do it.
 
 The faces of links that touched sit a systematic gap outside the object's surface (in PyBullet
-mostly the 1 mm collision margin of the object mesh, :data:`explore3d.quality.PYBULLET_MESH_MARGIN_M`,
+mostly the 1 mm collision margin of the object mesh, :data:`explore3d.sdf.PYBULLET_MESH_MARGIN_M`,
 plus the detection delay and the solver's compliance), so a reconstruction from link points
 comes out too large.  A real arm calibrates this once: it explores an object whose shape and pose
 it knows, measures how far its contact points lie outside that known surface, and from then on
@@ -156,7 +156,8 @@ def calibrate_thickness(arm="default", config=None, calibration_object=None, rej
         ``dataclasses.replace(config, face_offset=cal.face_offset_m)``.
     """
     from .explore import ExploreConfig, explore
-    from .quality import SignedDistance, contact_point_gaps
+    from .quality import contact_point_gaps
+    from .sdf import SignedDistance
 
     t0 = time.perf_counter()
     config = ExploreConfig() if config is None else config

@@ -7,9 +7,7 @@ processes with identical results for any number of jobs.
 """
 from __future__ import annotations
 
-import functools
 import logging
-import math
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -23,7 +21,7 @@ from .band import cached_band
 from .detect import ContactBand
 from .encircle import Attempt, ControlConfig, run_wrap
 from .kinematics import link_surface_points
-from .robot import RecordingRobot, RobotLog
+from .robot import RecordingRobot
 from .sensing import SensorConfig
 from .sim import ArmSimulation, SimConfig
 

@@ -2,25 +2,8 @@
 
 EVALUATION ONLY.  Nothing here is, or may be, used by the robot: the functions take the true
 object mesh and compare the recorded link geometry with it.  The exploration itself
-(:mod:`explore3d.encircle`) never sees the object.
-
-Geometry.  Link i is the box ``[0, L] x [-W/2, W/2] x [-H/2, H/2]`` in its own frame
-(:mod:`explore3d.arm`); ``T_world_link`` (4, 4) maps link coordinates to world coordinates
-(:func:`explore3d.kinematics.link_transforms`).  The distance of a link to the object is the
-minimum of the object's *signed distance* (metres, positive outside, negative inside) over the
-link's box surface, sampled on a grid of a given pitch.  The signed distance is 1-Lipschitz, so
-a sampled minimum overestimates the true one by at most the grid's covering radius (the largest
-distance of a surface point from its nearest sample); :func:`box_min_distance` uses that bound to
-prune links far from the surface coarse-to-fine, so only links near the surface are sampled
-finely.  Penetration depth is the largest negative signed distance over the same samples: the
-deepest point of a box pressed into a flat face lies on the box surface, so for the shallow
-penetrations met here this is the box's penetration; in general it is a lower bound.
-
-Why links touching the object sit ~1 mm off its surface: PyBullet gives the static concave
-triangle mesh a 1 mm collision margin (measured: ``getClosestPoints`` between a link face and the
-mesh returns the geometric gap minus 1.000 mm, :data:`PYBULLET_MESH_MARGIN_M`), so the contact
-constraint holds a face about that far out.  The detection delay and the solver's compliance add
-to or take from it; :mod:`explore3d.calibration` measures the net gap on a known object.
+(:mod:`explore3d.encircle`) never sees the object.  Distances come from :mod:`explore3d.sdf`; the
+detection rule recomputed here is the detector's own (:class:`explore3d.detect.SweepDetector`).
 
 Trajectory figures (delay, knock-off, trajectory penetration) need ``ExploreConfig(record=True)``.
 The recorded trajectory holds the sweep steps only (not the settle steps between sweeps); the
@@ -34,41 +17,16 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .arm import ArmSpec
+from .detect import SweepDetector
 from .kinematics import link_transforms
+from .sdf import (DETECTION_CONFIG_PITCH_M, PYBULLET_MESH_MARGIN_M, TRAJECTORY_PITCH_M, _as_sdf, box_min_distance,
+                  face_min_distance)
 
 __all__ = [
-    "BOX_FACES",
-    "ContactQuality",
-    "DETECTION_CONFIG_PITCH_M",
-    "FALSE_DETECTION_TOL_M",
-    "FalseDetectionDiagnosis",
-    "PYBULLET_MESH_MARGIN_M",
-    "SignedDistance",
-    "TOUCH_TOL_M",
-    "TRAJECTORY_PITCH_M",
-    "box_min_distance",
-    "box_surface_points",
-    "contact_gaps",
-    "contact_links",
-    "contact_point_gaps",
-    "exploration_points_3d",
-    "contact_quality",
-    "DetectionRecord",
-    "WrapReplay",
-    "detection_records",
-    "diagnose_false_detections",
-    "face_min_distance",
-    "replay_wrap",
-    "sweep_segments",
+    "ContactQuality", "DetectionRecord", "FALSE_DETECTION_TOL_M", "TOUCH_TOL_M", "contact_gaps", "contact_links",
+    "contact_point_gaps", "contact_quality", "detection_records", "exploration_points_3d", "sweep_segments",
     "swept_joints",
 ]
-
-#: PyBullet's collision margin of a static concave triangle mesh (GEOM_MESH with
-#: GEOM_FORCE_CONCAVE_TRIMESH), metres.  Measured with pybullet 3.2.7: a straight link whose
-#: inner face is g metres from a face of the cube gets ``getClosestPoints`` distance g - 1.000 mm
-#: for g from -1 to +10 mm (tests/test_quality.py checks it).  A resting contact therefore sits
-#: about this far outside the geometric surface.
-PYBULLET_MESH_MARGIN_M = 1.0e-3
 
 #: A detection counts as *false* when no part of the moving chain (the swept link and all links
 #: distal to it) is within this distance of the surface at the detection step, metres.  Twice the
@@ -79,202 +37,6 @@ FALSE_DETECTION_TOL_M = 2.0e-3
 #: the surface, metres: the mesh margin (where PyBullet's contact constraint acts) plus 0.2 mm for
 #: the sampling error of the trajectory grid (measured <= 0.2 mm near the surface at 2.5 mm pitch).
 TOUCH_TOL_M = PYBULLET_MESH_MARGIN_M + 0.2e-3
-
-#: Sampling pitch of the box surface for final and detection configurations, metres (measured
-#: sampling error near the surface <= 0.09 mm against a 0.1 mm reference grid on the cube).
-DETECTION_CONFIG_PITCH_M = 1.0e-3
-
-#: Sampling pitch along trajectories, metres (measured error near the surface <= 0.2 mm).
-TRAJECTORY_PITCH_M = 2.5e-3
-
-#: Names of the box faces, in the order of the face codes of :func:`box_surface_points`.
-BOX_FACES = ("inner", "outer", "top", "bottom", "proximal", "distal")
-
-
-# --- signed distance to the true mesh ------------------------------------------------------------
-class SignedDistance:
-    """Signed distance to a closed triangle mesh, metres, positive outside and negative inside.
-
-    Args:
-        mesh: a closed, outward-wound ``trimesh.Trimesh`` (metres, world frame).
-        backend: "open3d" (``RaycastingScene.compute_signed_distance``, float32 about the mesh's
-            bounding-box centre: ~1e-8 m rounding for 0.1 m objects; fast), "trimesh"
-            (``trimesh.proximity.signed_distance``, float64, ~100x slower) or "auto" (open3d if it
-            imports, else trimesh).
-
-    Calling it with points (..., 3), metres, world frame, returns (...) distances.
-    """
-
-    def __init__(self, mesh, backend: str = "auto"):
-        if backend not in ("auto", "open3d", "trimesh"):
-            raise ValueError(f"backend must be 'auto', 'open3d' or 'trimesh'; got {backend!r}")
-        V = np.asarray(getattr(mesh, "vertices", None), dtype=np.float64)
-        F = np.asarray(getattr(mesh, "faces", None), dtype=np.int64)
-        if V.ndim != 2 or V.shape[1:] != (3,) or F.ndim != 2 or F.shape[1:] != (3,) or len(F) == 0:
-            raise ValueError("mesh must be a trimesh.Trimesh with (v, 3) vertices and (f, 3) faces")
-        self.mesh = mesh
-        self.centre = (V.min(0) + V.max(0)) / 2.0
-        self._scene = None
-        if backend in ("auto", "open3d"):
-            try:
-                import open3d as o3d  # noqa: PLC0415 -- optional, heavy
-            except (ImportError, OSError) as exc:
-                if backend == "open3d":
-                    raise ImportError(f"open3d could not be imported ({exc}); pip install open3d-cpu, "
-                                      "or use backend='trimesh'") from None
-            else:
-                self._o3d = o3d
-                self._scene = o3d.t.geometry.RaycastingScene()
-                self._scene.add_triangles(o3d.core.Tensor((V - self.centre).astype(np.float32)),
-                                          o3d.core.Tensor(F.astype(np.uint32)))
-        self.backend = "open3d" if self._scene is not None else "trimesh"
-
-    def __call__(self, points) -> np.ndarray:
-        P = np.asarray(points, dtype=np.float64)
-        if P.shape[-1:] != (3,):
-            raise ValueError(f"points must have shape (..., 3); got {P.shape}")
-        flat = P.reshape(-1, 3)
-        if flat.shape[0] == 0:
-            return np.zeros(P.shape[:-1])
-        if self._scene is not None:
-            t = self._o3d.core.Tensor((flat - self.centre).astype(np.float32))
-            d = self._scene.compute_signed_distance(t).numpy().astype(np.float64)
-            # One ray misreads points whose ray grazes an edge (found: a point 9.8 mm outside the
-            # cube's corner read as 9.8 mm inside); points read as inside are re-decided by a
-            # majority of 3 rays (3x the cost, so only for them).
-            inside = np.nonzero(d < 0)[0]
-            if inside.size:
-                t3 = self._o3d.core.Tensor((flat[inside] - self.centre).astype(np.float32))
-                d[inside] = self._scene.compute_signed_distance(t3, nsamples=3).numpy().astype(np.float64)
-        else:
-            import trimesh  # noqa: PLC0415
-
-            d = -trimesh.proximity.signed_distance(self.mesh, flat)
-        return d.reshape(P.shape[:-1])
-
-
-def _as_sdf(obj):
-    """A signed-distance callable from a :class:`SignedDistance`, a mesh, or any callable
-    mapping points (..., 3), metres, to signed distances (...), metres (positive outside)."""
-    if isinstance(obj, SignedDistance) or (callable(obj) and not hasattr(obj, "vertices")):
-        return obj
-    return SignedDistance(obj)
-
-
-# --- link box sampling -----------------------------------------------------------------------------
-def box_surface_points(spec: ArmSpec, pitch_m: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """Samples of one link's box surface in its own link frame.
-
-    Every face of ``[0, L] x [-W/2, W/2] x [-H/2, H/2]`` gets a grid including its edges, with
-    spacings of at most ``pitch_m`` (each side split into ``ceil(side / pitch)`` equal parts).
-
-    Returns:
-        points: (k, 3) metres, link frame (edge samples appear once per adjacent face).
-        face: (k,) int, index into :data:`BOX_FACES` (inner = +y, outer = -y, top = +z,
-            bottom = -z, proximal = x 0, distal = x L).
-        cover_m: the covering radius: every point of the box surface is within this distance of
-            a sample (the largest half-diagonal of a grid cell), metres.
-    """
-    if not (isinstance(pitch_m, (int, float)) and math.isfinite(pitch_m) and pitch_m > 0):
-        raise ValueError(f"pitch_m must be a positive number of metres; got {pitch_m!r}")
-    L, W, H = spec.link_length, spec.link_width, spec.link_height
-
-    def axis(lo, hi):
-        n = max(1, math.ceil((hi - lo) / pitch_m - 1e-9))
-        return np.linspace(lo, hi, n + 1), (hi - lo) / n
-
-    xs, dx = axis(0.0, L)
-    ys, dy = axis(-W / 2, W / 2)
-    zs, dz = axis(-H / 2, H / 2)
-    pts, face = [], []
-
-    def add(code, a, b, make):
-        A, B = np.meshgrid(a, b, indexing="ij")
-        pts.append(make(A.ravel(), B.ravel()))
-        face.append(np.full(A.size, code))
-
-    add(0, xs, zs, lambda x, z: np.stack([x, np.full_like(x, W / 2), z], -1))
-    add(1, xs, zs, lambda x, z: np.stack([x, np.full_like(x, -W / 2), z], -1))
-    add(2, xs, ys, lambda x, y: np.stack([x, y, np.full_like(x, H / 2)], -1))
-    add(3, xs, ys, lambda x, y: np.stack([x, y, np.full_like(x, -H / 2)], -1))
-    add(4, ys, zs, lambda y, z: np.stack([np.zeros_like(y), y, z], -1))
-    add(5, ys, zs, lambda y, z: np.stack([np.full_like(y, L), y, z], -1))
-    cover = 0.5 * max(math.hypot(dx, dz), math.hypot(dx, dy), math.hypot(dy, dz))
-    return np.concatenate(pts), np.concatenate(face), cover
-
-
-def _transform(T: np.ndarray, local: np.ndarray) -> np.ndarray:
-    """(m, 4, 4) x (k, 3) -> (m, k, 3)."""
-    return np.einsum("mij,kj->mki", T[:, :3, :3], local) + T[:, None, :3, 3]
-
-
-def box_min_distance(spec: ArmSpec, T_world_link, sdf, cutoff_m: float = np.inf,
-                     pitches_m=(5.0e-3, DETECTION_CONFIG_PITCH_M),
-                     decide_only: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Distance of link boxes to the object, coarse to fine.
-
-    Every box is first bounded by the signed distance of its centre minus its circumradius, then
-    sampled at each pitch of ``pitches_m`` in turn; a box leaves the refinement as soon as its
-    lower bound (sampled minimum minus the grid's covering radius) exceeds ``cutoff_m``, since
-    then it is certainly farther than the cutoff.  Boxes that may be within the cutoff are sampled
-    at the finest pitch.
-
-    Args:
-        spec: the arm (box size).
-        T_world_link: (m, 4, 4) link poses, world frame.
-        sdf: a :class:`SignedDistance` (or a mesh).
-        cutoff_m: the distance of interest, metres (np.inf: refine every box).
-        pitches_m: increasing-resolution sampling pitches, metres.
-        decide_only: also stop refining a box once its sampled minimum (an upper bound) is
-            <= ``cutoff_m``: it is then known to be within the cutoff, which is all that
-            "is it within?" questions need (its ``dist`` is then from a coarser grid).
-
-    Returns:
-        dist: (m,) metres: the sampled minimum signed distance over the box surface at the finest
-            pitch the box reached (the centre distance minus the circumradius for boxes pruned
-            before any sampling).
-        err: (m,) metres: the true minimum lies in ``[dist - err, dist]`` (``err`` is the
-            covering radius of the grid used; 0 for centre-bounded boxes, whose ``dist`` is
-            itself a lower bound, so read those as ``dist`` <= true minimum).
-        depth: (m,) metres >= 0: the deepest penetration of the sampled box surface into the
-            object (0 for boxes certainly outside).
-    """
-    sdf = _as_sdf(sdf)
-    T = np.asarray(T_world_link, dtype=np.float64).reshape(-1, 4, 4)
-    m = T.shape[0]
-    L, W, H = spec.link_length, spec.link_width, spec.link_height
-    centres = T[:, :3, 3] + T[:, :3, 0] * (L / 2)
-    dist = sdf(centres) - 0.5 * math.sqrt(L * L + W * W + H * H)
-    err = np.zeros(m)
-    depth = np.zeros(m)
-    cut = max(float(cutoff_m), 0.0)
-    active = np.flatnonzero(dist <= cut)
-    for pitch in pitches_m:
-        if active.size == 0:
-            break
-        local, _, cover = box_surface_points(spec, pitch)
-        d = sdf(_transform(T[active], local))
-        dmin = d.min(axis=1)
-        dist[active], err[active] = dmin, cover
-        depth[active] = np.maximum(0.0, -dmin)
-        keep = dmin - cover <= cut
-        if decide_only:
-            keep &= dmin > cut
-        active = active[keep]
-    return dist, err, depth
-
-
-def face_min_distance(spec: ArmSpec, T_world_link, sdf, face: str = "inner",
-                      pitch_m: float = DETECTION_CONFIG_PITCH_M) -> np.ndarray:
-    """(m,) minimum signed distance, metres, over one face (a name of :data:`BOX_FACES`) of each
-    link box with pose ``T_world_link`` (m, 4, 4)."""
-    if face not in BOX_FACES:
-        raise ValueError(f"face must be one of {BOX_FACES}; got {face!r}")
-    local, code, _ = box_surface_points(spec, pitch_m)
-    local = local[code == BOX_FACES.index(face)]
-    T = np.asarray(T_world_link, dtype=np.float64).reshape(-1, 4, 4)
-    return _as_sdf(sdf)(_transform(T, local)).min(axis=1)
-
 
 # --- trajectory bookkeeping ------------------------------------------------------------------------
 def swept_joints(trajectory_ref) -> np.ndarray:
@@ -355,33 +117,24 @@ class DetectionRecord:
 
 
 def _trigger(att, band, k: int, s: int, e: int, base_err=None, watch_held: bool = True) -> tuple[int, float]:
-    """Recompute the detection signals of :func:`explore3d.encircle.run_attempt` at row e of
-    sweep k (rows s..e) from the recorded trajectory; return (joint, signal / band).
+    """The detector's signals (:class:`explore3d.detect.SweepDetector`) at row e of sweep k (rows
+    s..e), recomputed from the recorded trajectory; return (joint, signal / band), joint -1 when
+    every signal is inside its band.
 
     ``base_err`` (n,) is the joint error q_ref - q just before the sweep (rad); the recording
     does not hold it (settle steps are not recorded), so by default the first sweep row's error
-    stands in for it (:func:`replay_wrap` gives the exact one).  ``watch_held``: the controller
-    also watches the held joints (``ControlConfig.watch_held``; older controllers always did)."""
+    stands in for it (the robot log of a recorded exploration gives the exact one).
+    ``watch_held``: as ``ControlConfig.watch_held``."""
     Q, R = att.trajectory, att.trajectory_ref
     if e - s < 1:
         return -1, 0.0
-    if base_err is None:
-        base_err = R[s] - Q[s]
-    ratios = []
+    det = SweepDetector(k, R[s], Q[s], watch_held)
+    if base_err is not None:
+        det.base_err = np.asarray(base_err, dtype=np.float64)
     for t in (e - 1, e):
-        wdt = R[t, k] - R[t - 1, k]
-        lag = (R[t, k] - wdt) - Q[t, k]
-        sig = (R[t] - Q[t]) - base_err
-        sig[k] = 0.0
-        if not watch_held:
-            sig[:k] = 0.0
-        ratios.append((lag, sig))
-    lag2 = 0.5 * (ratios[0][0] + ratios[1][0])
-    sig2 = 0.5 * (ratios[0][1] + ratios[1][1])
-    r = np.abs(sig2) / band.other
-    r[k] = lag2 / band.swept[k]
-    j = int(np.argmax(r))
-    return (j if r[j] >= 1.0 else -1), float(r[j])
+        lag, sig = det.update(R[t - 1, k], R[t], Q[t])
+    j, r = SweepDetector.ratio(band, k, lag, sig)
+    return (j if r >= 1.0 else -1), r
 
 
 def _first_touch(spec, att, sdf, k: int, s: int, e: int, touch_tol_m: float, chunk: int = 24) -> int:
@@ -418,6 +171,8 @@ def detection_records(exploration, mesh, touch_tol_m: float = TOUCH_TOL_M, cutof
         atts = exploration.attempts[wi]
         rp = (replays or {}).get(wi)
         if rp is None and exact_triggers:
+            from .replay import replay_wrap
+
             rp = replay_wrap(exploration, getattr(sdf, "mesh", mesh), wi)
         base = rp.base_err if rp is not None else None
         for ai, att in enumerate(atts):
@@ -772,206 +527,3 @@ def contact_quality(exploration, mesh, false_tol_m: float = FALSE_DETECTION_TOL_
         knock_off_held_median_rad=_q(held_per, 50), knock_off_final_max_rad=final_knock,
         trajectory_steps=total, trajectory_stride=int(stride), wall_s=time.perf_counter() - t0,
     )
-
-
-# --- replay with the physics oracle --------------------------------------------------------------------
-@dataclass(frozen=True)
-class WrapReplay:
-    """One wrap re-simulated step by step with PyBullet's contact report (evaluation only).
-
-    Every physics step of the wrap (settle steps included), in order:
-
-    Attributes:
-        q_ref, q: (s, n) commanded references and measured joint angles after the step, rad.
-        forces: (s, n) motor torque limits sent, N m (the arm's full torques in settle steps).
-        motor_torque_nm: (s, n) the torque each motor applied in the step, N m (PyBullet's
-            ``appliedJointMotorTorque``; equal to ``forces`` in size when a motor is saturated).
-        contact_distance_m: (s, n) per link the smallest PyBullet contact distance with the
-            object after the step (its geometric gap minus the mesh margin; +inf: no contact point).
-        normal_force_n: (s, n) per link the summed normal force of its contact points, N.
-        attempt: (s,) int, the attempt each step belongs to.
-        sweep_joint: (s,) int, the joint sweeping at the step (-1 in settle steps).
-        base_err: per attempt, a dict {joint k: (n,) q_ref - q just before k's sweep, rad}.
-        identical: the replay reproduced the recorded attempts bit for bit.
-    """
-
-    q_ref: np.ndarray
-    q: np.ndarray
-    forces: np.ndarray
-    motor_torque_nm: np.ndarray
-    contact_distance_m: np.ndarray
-    normal_force_n: np.ndarray
-    attempt: np.ndarray
-    sweep_joint: np.ndarray
-    base_err: tuple
-    identical: bool
-
-
-def replay_wrap(exploration, mesh, wrap: int) -> WrapReplay:
-    """Re-run wrap ``wrap`` of ``exploration`` in a fresh simulation of ``mesh`` (the same closed
-    trimesh, world frame) with the exploration's own controller, logging every physics step and
-    PyBullet's contact points (an oracle the exploration never sees).  Wraps are deterministic,
-    so the replay reproduces the recorded attempts exactly (checked: ``identical``)."""
-    from .encircle import run_wrap
-    from .sim import ArmSimulation
-
-    if not (0 <= wrap < exploration.n_wraps):
-        raise ValueError(f"wrap must be in [0, {exploration.n_wraps}); got {wrap!r}")
-    spec, cfg = exploration.spec, exploration.config
-    n = spec.n_links
-    log: dict = {k: [] for k in ("q_ref", "q", "forces", "torque", "dist", "force", "sweep")}
-    with ArmSimulation(spec, np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), cfg.sim) as sim:
-        full = np.array(sim.torques, dtype=float)
-        step = sim.step
-        p = sim.client
-
-        def logged_step(q_ref, *args, **kwargs):
-            q = step(q_ref, *args, **kwargs)
-            forces = args[1] if len(args) > 1 else kwargs.get("forces")
-            d, f = np.full(n, np.inf), np.zeros(n)
-            for c in p.getContactPoints(bodyA=sim.arm, bodyB=sim.object):
-                j = c[3]
-                if 0 <= j < n:
-                    d[j] = min(d[j], c[8])
-                    f[j] += c[9]
-            log["q_ref"].append(np.array(q_ref, dtype=float))
-            log["q"].append(q.copy())
-            log["torque"].append(np.array([st[3] for st in p.getJointStates(sim.arm, sim.joints)]))
-            log["forces"].append(full.copy() if forces is None else np.minimum(forces, full))
-            log["sweep"].append(forces is not None)  # settle steps send references only
-            log["dist"].append(d)
-            log["force"].append(f)
-            return q
-
-        sim.step = logged_step
-        starts = []
-        orig_set_base = sim.set_base
-
-        def marked_set_base(T):
-            starts.append(len(log["q"]))
-            orig_set_base(T)
-
-        sim.set_base = marked_set_base
-        atts = run_wrap(sim, exploration.poses[wrap].T_world_base, exploration.band, attempts=cfg.attempts,
-                        base_step=cfg.base_step, cfg=cfg.control, record=True)
-    rec = exploration.attempts[wrap]
-    identical = len(atts) == len(rec) and all(
-        np.array_equal(a.q, b.q) and np.array_equal(a.trajectory, b.trajectory) for a, b in zip(atts, rec))
-    Qr, Q, F = (np.array(log[k]) for k in ("q_ref", "q", "forces"))
-    s = len(Q)
-    attempt = np.searchsorted(np.array(starts), np.arange(s), side="right") - 1
-    sweeping = np.array(log["sweep"], dtype=bool)
-    changed = Qr != np.vstack([np.zeros((1, n)), Qr[:-1]])
-    top = np.where(changed.any(axis=1), n - 1 - np.argmax(changed[:, ::-1], axis=1), -1)
-    sweep_joint = np.full(s, -1)
-    for t in np.flatnonzero(sweeping):  # the highest joint whose reference moved; else as before
-        sweep_joint[t] = top[t] if top[t] >= 0 else (sweep_joint[t - 1] if t else 0)
-    base = []
-    for a in range(len(starts)):
-        idx = np.flatnonzero(attempt == a)
-        d = {}
-        for t in idx:
-            k = int(sweep_joint[t])
-            if k >= 0 and k not in d and t - 1 >= idx[0]:
-                d[k] = Qr[t - 1] - Q[t - 1]
-        base.append(d)
-    return WrapReplay(q_ref=Qr, q=Q, forces=F, motor_torque_nm=np.array(log["torque"]), contact_distance_m=np.array(log["dist"]),
-                      normal_force_n=np.array(log["force"]), attempt=attempt, sweep_joint=sweep_joint,
-                      base_err=tuple(base), identical=bool(identical))
-
-
-@dataclass(frozen=True)
-class FalseDetectionDiagnosis:
-    """Why false detections happen, from replays of the wraps with PyBullet's contact report.
-
-    Counts are over the false detections (moving chain farther than ``false_tol_m`` at the
-    detection step) of the wraps replayed.
-
-    Attributes:
-        n_wraps, n_detections, n_false: sizes.
-        n_touched: false detections whose moving chain came within the touch tolerance at any
-            step of the sweep (0: the chain never touched: not a spring-back after a contact).
-        n_own_lag, n_held, n_distal, n_none: what crossed its band at detection: the swept
-            joint's own lag; the error change of a held (proximal) joint; of a not-yet-swept
-            (distal) joint; nothing found.
-        trigger_joints: (n,) count per triggering joint.
-        held_saturated_fraction: of the held-joint triggers, the fraction whose motor applied its
-            full torque limit (>= 99%) in the step before the sweep.
-        held_error_before_median_rad, held_error_before_max_rad: |q_ref - q| of the triggering
-            held joint before the sweep (an error locked in by earlier sweeps).
-        trigger_ratio_median: the triggering signal over its band, median.
-        held_force_peak_median_n: peak summed normal force on the held links during the sweep, N.
-        held_force_drops_fraction: fraction of the sweeps in which the held links' contact force
-            dropped to zero at some step while they had been in contact (chatter).
-        true_n_own_lag, true_n_held: the same split for the detections that are not false.
-    """
-
-    n_wraps: int
-    n_detections: int
-    n_false: int
-    n_touched: int
-    n_own_lag: int
-    n_held: int
-    n_distal: int
-    n_none: int
-    trigger_joints: tuple
-    held_saturated_fraction: float
-    held_error_before_median_rad: float
-    held_error_before_max_rad: float
-    trigger_ratio_median: float
-    held_force_peak_median_n: float
-    held_force_drops_fraction: float
-    true_n_own_lag: int
-    true_n_held: int
-
-    def to_dict(self) -> dict:
-        d = asdict(self)
-        d["trigger_joints"] = list(self.trigger_joints)
-        return d
-
-
-def diagnose_false_detections(exploration, mesh, false_tol_m: float = FALSE_DETECTION_TOL_M,
-                              touch_tol_m: float = TOUCH_TOL_M, wraps=None) -> FalseDetectionDiagnosis:
-    """Replay ``wraps`` (default all) of a recorded exploration of ``mesh`` (the true closed
-    trimesh) and tell what triggered each false detection (see :class:`FalseDetectionDiagnosis`)."""
-    sdf = SignedDistance(mesh) if not isinstance(mesh, SignedDistance) else mesh
-    spec = exploration.spec
-    n = spec.n_links
-    wraps = list(range(exploration.n_wraps) if wraps is None else wraps)
-    replays = {w: replay_wrap(exploration, sdf.mesh, w) for w in wraps}
-    recs = detection_records(exploration, sdf, touch_tol_m=touch_tol_m, cutoff_m=false_tol_m, wraps=wraps,
-                             replays=replays)
-    trig = np.zeros(n, dtype=int)
-    counts = {"own": 0, "held": 0, "distal": 0, "none": 0}
-    true_counts = {"own": 0, "held": 0, "distal": 0, "none": 0}
-    sat, pre, ratios, peaks, drops = [], [], [], [], []
-    n_false = n_touched = 0
-    for r in recs:
-        kind = "none" if r.trigger < 0 else "own" if r.trigger == r.joint else "held" if r.trigger < r.joint else "distal"
-        if r.chain_distance_m <= false_tol_m:
-            true_counts[kind] += 1
-            continue
-        n_false += 1
-        n_touched += int(r.touch_row >= 0)
-        counts[kind] += 1
-        ratios.append(r.trigger_ratio)
-        if r.trigger >= 0:
-            trig[r.trigger] += 1
-        rp = replays[r.wrap]
-        idx = np.flatnonzero((rp.attempt == r.attempt) & (rp.sweep_joint == r.joint))
-        t0, t1 = int(idx[0]), int(idx[-1])
-        F = rp.normal_force_n[t0:t1 + 1, : r.joint].sum(axis=1)
-        peaks.append(float(F.max(initial=0.0)))
-        drops.append(bool(F.max(initial=0.0) > 0 and (F[np.argmax(F > 0):] == 0).any()))
-        if kind == "held":
-            j = r.trigger
-            sat.append(abs(rp.motor_torque_nm[t0 - 1, j]) >= 0.99 * rp.forces[t0 - 1, j])
-            pre.append(abs(rp.q_ref[t0 - 1, j] - rp.q[t0 - 1, j]))
-    return FalseDetectionDiagnosis(
-        n_wraps=len(wraps), n_detections=len(recs), n_false=n_false, n_touched=n_touched, n_own_lag=counts["own"],
-        n_held=counts["held"], n_distal=counts["distal"], n_none=counts["none"], trigger_joints=tuple(trig.tolist()),
-        held_saturated_fraction=float(np.mean(sat)) if sat else float("nan"),
-        held_error_before_median_rad=_q(pre, 50), held_error_before_max_rad=float(max(pre)) if pre else float("nan"),
-        trigger_ratio_median=_q(ratios, 50), held_force_peak_median_n=_q(peaks, 50),
-        held_force_drops_fraction=float(np.mean(drops)) if drops else float("nan"),
-        true_n_own_lag=true_counts["own"], true_n_held=true_counts["held"])

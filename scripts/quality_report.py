@@ -18,7 +18,8 @@ import time
 
 from explore3d import ExploreConfig, explore, load_object, run
 from explore3d.calibration import calibrate_thickness
-from explore3d.quality import contact_quality, diagnose_false_detections
+from explore3d.quality import contact_quality
+from explore3d.replay import diagnose_false_detections
 
 A = 0.05  # inverse-hull coarseness of the scored reconstructions
 

@@ -21,7 +21,8 @@ from explore3d.calibration import (
 from explore3d.explore import ExploreConfig, explore
 from explore3d.kinematics import link_surface_points
 from explore3d.objects import load_object
-from explore3d.quality import SignedDistance, contact_point_gaps
+from explore3d.quality import contact_point_gaps
+from explore3d.sdf import SignedDistance
 
 SPEC = load_arm("default")
 

@@ -1,7 +1,5 @@
 """Whole-arm encirclement in PyBullet: oracle-free, deterministic, and the paper's findings."""
 import numpy as np
-import pybullet
-import pytest
 import trimesh
 
 from explore3d.arm import ArmSpec

@@ -14,21 +14,9 @@ from explore3d.arm import load_arm
 from explore3d.explore import ExploreConfig, explore
 from explore3d.kinematics import link_transforms
 from explore3d.objects import load_object
-from explore3d.quality import (
-    BOX_FACES,
-    FALSE_DETECTION_TOL_M,
-    PYBULLET_MESH_MARGIN_M,
-    SignedDistance,
-    box_min_distance,
-    box_surface_points,
-    contact_gaps,
-    contact_quality,
-    detection_records,
-    face_min_distance,
-    replay_wrap,
-    sweep_segments,
-    swept_joints,
-)
+from explore3d.quality import FALSE_DETECTION_TOL_M, contact_gaps, contact_quality, detection_records, sweep_segments, swept_joints
+from explore3d.replay import replay_wrap
+from explore3d.sdf import BOX_FACES, PYBULLET_MESH_MARGIN_M, SignedDistance, box_min_distance, box_surface_points, face_min_distance
 
 SPEC = load_arm("default")
 HALF = 0.04  # half edge of the built-in 80 mm cube, metres

@@ -1,7 +1,6 @@
 """The robot interface: what passes through the door, realistic sensing, logs that replay, and
 proof that the exploration cannot see the world."""
 import dataclasses
-import json
 import os
 import re
 import subprocess
@@ -16,11 +15,11 @@ import pytest
 from explore3d.arm import ArmSpec
 from explore3d.band import cached_band
 from explore3d.encircle import ControlConfig, run_wrap
-from explore3d.kinematics import gravity_torques, link_transforms, point_jacobian
+from explore3d.kinematics import gravity_torques, point_jacobian
 from explore3d.objects import cube
 from explore3d.robot import LogMismatchError, LogRobot, RecordingRobot, Robot, RobotLog, make_command
 from explore3d.sensing import SensorConfig
-from explore3d.sim import ArmSimulation, SimRobot
+from explore3d.sim import ArmSimulation
 
 SMALL = ArmSpec(name="small12", n_links=12, link_length=0.025)
 ROOT = Path(__file__).resolve().parents[1]
@@ -30,7 +29,7 @@ WORLD_QUERIES = ("getContactPoints", "getClosestPoints", "rayTest", "rayTestBatc
                  "getBasePositionAndOrientation", "getBaseVelocity", "getAABB", "getOverlappingObjects")
 
 #: Modules of the evaluation layer (truth and oracle), the only ones allowed to name them.
-EVALUATION_MODULES = {"quality.py", "calibration.py", "pictures.py"}
+EVALUATION_MODULES = {"quality.py", "replay.py", "sdf.py", "calibration.py", "pictures.py"}
 
 
 def _vertical_base():
