@@ -20,7 +20,11 @@ import io
 import os
 import sys
 
-__all__ = ["STDERR", "quiet_c_output", "quiet_import_pybullet"]
+__all__ = ["PYBULLET_BANNERS", "STDERR", "quiet_c_output", "quiet_import_pybullet"]
+
+#: Text PyBullet's C code prints (seen with pybullet 3.2.7); none of it may reach a user's terminal.
+PYBULLET_BANNERS = ("argv[0]=", "PyBullet: Constraint Solver", "switched solver", "pybullet build time",
+                    "TinyRenderer", "startThreads")
 
 
 class _CurrentStderr:
