@@ -29,6 +29,7 @@ _EXPORTS = {
     "ControlConfig": "encircle", "SimConfig": "sim",
     "ThicknessCalibration": "calibration", "calibrate_thickness": "calibration",
     "ContactQuality": "quality", "contact_quality": "quality",
+    "OutputConfig": "pipeline", "run_and_report": "pipeline", "quiet_c_output": "_quiet",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -15,18 +15,20 @@ Heavy modules (numpy, trimesh, pybullet, matplotlib) are imported inside the com
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import logging
 import math
-import os
 import sys
 from pathlib import Path
+
+from .defaults import DEFAULT_A
 
 PROG = "explore3d"
 MESH_FORMATS = ("obj", "stl", "ply", "off", "glb")  # = explore3d.export.MESH_FORMATS (not imported: heavy)
 METHODS = ("exponential", "spherical")
 MODES = ("3d", "planar")
+#: = explore3d.export.DEFAULT_DENSITY_KG_M3 (not imported: heavy); tests check they agree.
+DEFAULT_DENSITY_KG_M3 = 500.0
 
 log = logging.getLogger("explore3d.cli")
 
@@ -166,10 +168,17 @@ RUN_OPTIONS = {
     # contact thickness: a known calibration (metres) or calibrate now on the 60 mm ball
     "face_offset": _nonnegative("--face-offset"),
     "calibrate": None,  # bool
+    # evaluation after the run: the contact-quality figures (opt-in; "no_quality" is the default, kept
+    # so older command lines and configs still work)
+    "quality": None,  # bool
     "no_quality": None,  # bool
+    # outputs
+    "density": _positive("--density"),
+    "height": _positive("--height"),
 }
-RUN_DEFAULTS = {"object": "cube", "arm": "default", "mode": "3d", "a": 0.05, "method": "exponential", "seed": 0,
-                "format": "obj"}
+_BOOL_OPTIONS = ("mirrored", "no_pictures", "calibrate", "quality", "no_quality")
+RUN_DEFAULTS = {"object": "cube", "arm": "default", "mode": "3d", "a": DEFAULT_A, "method": "exponential", "seed": 0,
+                "format": "obj", "density": DEFAULT_DENSITY_KG_M3}
 _EXPLORE_KEYS = ("mode", "directions", "attempts", "jobs", "offsets", "angles", "mirrored", "base_step",
                  "clearance", "n_along", "n_height", "face_offset")
 
@@ -202,7 +211,7 @@ def read_toml_config(path) -> dict:
         if key not in RUN_OPTIONS:
             raise UsageError(f"unknown key {k!r} in config {path}; valid keys: {', '.join(sorted(RUN_OPTIONS))}")
         check = RUN_OPTIONS[key]
-        if key in ("mirrored", "no_pictures", "calibrate", "no_quality"):
+        if key in _BOOL_OPTIONS:
             out[key] = _check_bool(v, key)
         elif check is str:
             if not isinstance(v, str):
@@ -212,6 +221,8 @@ def read_toml_config(path) -> dict:
             out[key] = check(v)
     if "scale" in out and "size" in out:
         raise UsageError(f"config {path} sets both scale and size; keep one")
+    if out.get("quality") and out.get("no_quality"):
+        raise UsageError(f"config {path} sets both quality and no_quality; keep one")
     return out
 
 
@@ -236,7 +247,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--attempts", type=RUN_OPTIONS["attempts"], help="attempts per wrap")
     r.add_argument("--offsets", type=RUN_OPTIONS["offsets"], help="3d: planes per normal")
     r.add_argument("--angles", type=RUN_OPTIONS["angles"], help="3d: approach angles per plane")
-    r.add_argument("--a", type=RUN_OPTIONS["a"], help="inverse-hull coarseness > 0 (default 0.05, as explore3d.run)")
+    r.add_argument("--a", type=RUN_OPTIONS["a"], help=f"inverse-hull coarseness > 0 (default {DEFAULT_A}, as explore3d.run)")
     r.add_argument("--method", type=RUN_OPTIONS["method"], help="exponential (default) or spherical")
     r.add_argument("--seed", type=RUN_OPTIONS["seed"], help="seed of the error-measure surface samples (default 0)")
     r.add_argument("--jobs", type=RUN_OPTIONS["jobs"], help="worker processes >= 1 (default: all cores; results do not depend on it)")
@@ -252,9 +263,18 @@ def build_parser() -> argparse.ArgumentParser:
                         "vertex distance from the centre); contact points beyond it are dropped")
     r.add_argument("--no-pictures", dest="no_pictures", action="store_true", default=None,
                    help="skip the PNG pictures (faster)")
-    r.add_argument("--no-quality", dest="no_quality", action="store_true", default=None,
-                   help="skip the contact-quality figures (they need the run's recorded joint trajectories "
-                        "and the true mesh; evaluation only, after the run)")
+    q_ = r.add_mutually_exclusive_group()
+    q_.add_argument("--quality", dest="quality", action="store_true", default=None,
+                    help="also compute the contact-quality figures (evaluation only, after the run, against the "
+                         "true mesh; records the joint trajectories; slow: cube 45 s exploring + 33 s quality, "
+                         "duck 34 s + 13 min); their time is report.json's timings.quality_s")
+    q_.add_argument("--no-quality", dest="no_quality", action="store_true", default=None,
+                    help="no contact-quality figures (the default; kept for older command lines)")
+    r.add_argument("--density", type=RUN_OPTIONS["density"],
+                   help=f"density of the estimate body in estimate.urdf, kg/m^3 (default {DEFAULT_DENSITY_KG_M3:g})")
+    r.add_argument("--height", type=RUN_OPTIONS["height"],
+                   help="planar runs: extrude the estimate polygon this many metres, centred on the arm's plane "
+                        "(default: the arm's sensed height band, the plane's z +- half the link height)")
     t_ = r.add_mutually_exclusive_group()
     t_.add_argument("--face-offset", dest="face_offset", type=RUN_OPTIONS["face_offset"],
                     help="calibrated contact thickness, metres: link faces are pushed this far towards the "
@@ -272,14 +292,15 @@ def build_parser() -> argparse.ArgumentParser:
                                    "(planar runs) give a polygon: --out X.json, or a mesh extruded by --height.")
     c.add_argument("points", help="point file (PLY, XYZ, or anything trimesh loads)")
     c.add_argument("--out", required=True, help="output mesh (.obj .stl .ply .off .glb) or polygon .json")
-    c.add_argument("--a", type=RUN_OPTIONS["a"], default=0.2, help="coarseness > 0 (default 0.2)")
+    c.add_argument("--a", type=RUN_OPTIONS["a"], default=DEFAULT_A, help=f"coarseness > 0 (default {DEFAULT_A}, as run)")
     c.add_argument("--method", type=RUN_OPTIONS["method"], default="exponential")
     c.add_argument("--centre", type=_centre, default="midrange",
                    help="mean, midrange (default) or x,y[,z] in metres (2D points use x,y)")
     c.add_argument("--radius", type=_positive("--radius"),
                    help="drop points farther than this many metres from --centre (as 'run' does with its rough "
                         "bound: report.json's config.centre_m and config.radius_m)")
-    c.add_argument("--height", type=_positive("--height"), help="2D points: extrude the polygon this many metres")
+    c.add_argument("--height", type=_positive("--height"),
+                   help="2D points: extrude the polygon this many metres, centred on the points' plane")
     c.set_defaults(func=cmd_reconstruct)
 
     e = sub.add_parser("evaluate", help="error measures of an estimate against the truth",
@@ -342,6 +363,8 @@ def resolve_run_options(args) -> dict:
         v = getattr(args, key, None)
         if v is not None:
             opts[key] = v
+    if getattr(args, "no_quality", None):  # a flag beats a config's quality = true
+        opts["quality"] = False
     if not opts.get("out"):
         raise UsageError("run needs an output folder: pass --out DIR (or out = \"DIR\" in --config)")
     return opts
@@ -383,175 +406,73 @@ def _prepare_out_dir(out: Path) -> None:
                        "choose a writable --out folder") from None
 
 
-def package_versions() -> dict:
-    """Versions of explore3d and its main dependencies (for report.json)."""
-    from importlib import metadata
-
-    out = {"explore3d": _version()}
-    for name in ("numpy", "scipy", "trimesh", "pybullet", "shapely"):
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = None
-    return out
-
-
-def _json_default(o):
-    import numpy as np
-
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    if hasattr(o, "value"):  # enums
-        return o.value
-    if isinstance(o, (set, frozenset, tuple)):
-        return list(o)
-    return str(o)
-
-
 def _dump(obj) -> str:
-    return json.dumps(obj, indent=2, default=_json_default) + "\n"
+    from .io import json_text
 
-
-@contextlib.contextmanager
-def _silence_fd(fd: int):
-    """Send the C-level output on file descriptor ``fd`` to /dev/null (PyBullet prints its build
-    time to stderr on import and solver banners to stdout on connect)."""
-    stream = {1: sys.stdout, 2: sys.stderr}[fd]
-    try:
-        stream.flush()
-        saved = os.dup(fd)
-    except (OSError, ValueError, AttributeError):  # no real descriptor (embedded use): leave it
-        yield
-        return
-    try:
-        with open(os.devnull, "wb") as null:
-            os.dup2(null.fileno(), fd)
-        yield
-    finally:
-        with contextlib.suppress(OSError, ValueError):
-            stream.flush()
-        os.dup2(saved, fd)
-        os.close(saved)
+    return json_text(obj)
 
 
 def cmd_run(args) -> int:
+    """Parse -> configuration dataclasses -> :func:`explore3d.pipeline.run_and_report` -> one line."""
     opts = resolve_run_options(args)
     _setup_logging(args.verbose)
     out = Path(opts["out"])
     _check_object_name(opts["object"])
     config = explore_config(opts)
-    if not opts.get("no_quality"):
-        import dataclasses
+    if opts.get("calibrate") and "face_offset" in opts:
+        raise UsageError("--calibrate and --face-offset exclude each other: pass one")
 
-        config = dataclasses.replace(config, record=True)  # the quality figures read the trajectories
+    from ._quiet import STDERR, quiet_c_output
 
-    from .arm import load_arm
+    with quiet_c_output():  # PyBullet's banners (import, connect, solver switch, renderer)
+        from .arm import load_arm
+        from .pipeline import NoContactError, OutputConfig, ReconstructionError, run_and_report
 
-    try:
-        spec = load_arm(opts["arm"])
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    _prepare_out_dir(out)
-
-    import numpy as np
-
-    with _silence_fd(2):
-        import pybullet  # noqa: F401  (its build-time banner would be a second stderr line)
-    from .export import write_points_ply
-    from .io import atomic_write_text
-    from .objects import load_object
-    from .pipeline import NoContactError, ReconstructionError, exploration_summary, rough_bound_or, run, write_result
-
-    mesh = load_object(opts["object"], scale=opts.get("scale"), size=opts.get("size"))
-    log.info("object %s: extents %s m", opts["object"], np.round(mesh.extents, 4).tolist())
-    centre, radius = rough_bound_or(mesh, opts.get("centre"), opts.get("radius"))
-
-    bar = None
-    if not args.quiet:
-        from tqdm import tqdm
-
-        bar = tqdm(total=None, desc="wraps", unit="wrap", file=sys.stderr, leave=False)
-
-    def progress(done, total):
-        if bar is not None:
-            bar.total = total
-            bar.n = done
-            bar.refresh()
-        log.info("wrap %d/%d done", done, total)
-
-    report = {
-        "object": opts["object"], "mode": config.mode, "arm": opts["arm"], "a": opts["a"], "method": opts["method"],
-        "config": {"explore": config.to_dict(), "arm": spec.to_dict(), "a": opts["a"], "method": opts["method"],
-                   "seed": opts["seed"], "centre_m": [float(x) for x in centre], "radius_m": radius,
-                   "rough_bound": "given" if ("centre" in opts or "radius" in opts) else "rough_bound(mesh)",
-                   "format": opts["format"], "scale": opts.get("scale"), "size": opts.get("size"),
-                   "pictures": not opts.get("no_pictures", False)},
-        "versions": package_versions(),
-    }
-
-    def fail(ex, msg: str) -> int:
-        report.update(exploration_summary(ex))
-        report["error"] = msg
-        if len(ex.points):
-            write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
-        atomic_write_text(out / "report.json", _dump(report))
-        raise RunError(f"{msg} (report written to {out / 'report.json'})")
-
-    if opts.get("calibrate"):
-        import dataclasses
-
-        from .calibration import calibrate_thickness
-
-        if "face_offset" in opts:
-            raise UsageError("--calibrate and --face-offset exclude each other: pass one")
-        log.info("calibrating the contact thickness on the 60 mm ball")
-        with _silence_fd(1):
-            cal = calibrate_thickness(spec, config)
-        if bar is not None:
-            bar.reset()  # the bar's clock counts the run's wraps only
-        config = dataclasses.replace(config, face_offset=cal.face_offset_m)
-        report["calibration"] = cal.to_dict()
-        report["config"]["explore"] = config.to_dict()
-        log.info("calibrated contact thickness %.3g m", cal.face_offset_m)
-
-    try:
-        with _silence_fd(1):  # PyBullet's solver banners; progress goes to stderr
-            res = run(mesh, spec, config, a=opts["a"], method=opts["method"], progress=progress,
-                      centre=centre, radius=radius, seed=opts["seed"])
-    except NoContactError as exc:
-        return fail(exc.exploration, "no contacts at all: the arm never touched the object; check the object size "
-                                     "and rough bound against the arm (--size, --arm, --centre, --radius) or add "
-                                     "--directions/--attempts")
-    except ReconstructionError as exc:
-        return fail(exc.exploration, f"reconstruction failed: {exc}")
-    finally:
-        if bar is not None:
-            bar.close()
-
-    ex, err = res.exploration, res.error
-    summary = res.summary()
-    for k in ("centre_m", "radius_m"):  # already in config
-        summary.pop(k)
-    report.update(summary)
-    report["errors"] = err.to_dict()
-    if not opts.get("no_quality"):
-        from .quality import contact_quality
-
-        # Evaluation only, after the run: the recorded joint trajectories against the true mesh.
-        report["contact_quality"] = contact_quality(ex, mesh).to_dict()
-    if config.mode == "planar":
-        report["section_z_m"] = float(res.centre[2])  # the arm's plane passes through the rough centre
-    pictures = not opts.get("no_pictures", False)
-    with _silence_fd(1):  # PyBullet's TinyRenderer banners
         try:
-            files = write_result(res, mesh, out, opts["format"], pictures=pictures)
-        except ImportError as exc:  # pragma: no cover - matplotlib missing
-            log.warning("no pictures: %s", exc)
-            files = write_result(res, mesh, out, opts["format"], pictures=False)
-    report["files"] = sorted(files + ["report.json"])
-    atomic_write_text(out / "report.json", _dump(report))
+            spec = load_arm(opts["arm"])
+            output = OutputConfig(fmt=opts["format"], pictures=not opts.get("no_pictures", False),
+                                  quality=bool(opts.get("quality", False)), density=opts["density"],
+                                  height=opts.get("height"))
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        _prepare_out_dir(out)
+
+        import numpy as np
+
+        from .objects import load_object
+
+        mesh = load_object(opts["object"], scale=opts.get("scale"), size=opts.get("size"))
+        log.info("object %s: extents %s m", opts["object"], np.round(mesh.extents, 4).tolist())
+
+        bar = None
+        if not args.quiet:
+            from tqdm import tqdm
+
+            bar = tqdm(total=None, desc="wraps", unit="wrap", file=STDERR, leave=False)
+
+        def progress(done, total):
+            if bar is not None:
+                bar.total = total
+                bar.n = done
+                bar.refresh()
+            log.info("wrap %d/%d done", done, total)
+
+        try:
+            res, report = run_and_report(
+                mesh, opts["arm"], config, out, output=output, a=opts["a"], method=opts["method"], seed=opts["seed"],
+                centre=opts.get("centre"), radius=opts.get("radius"), calibrate=bool(opts.get("calibrate")),
+                progress=progress, object_name=opts["object"],
+                source={"scale": opts.get("scale"), "size": opts.get("size")})
+        except NoContactError:
+            raise RunError("no contacts at all: the arm never touched the object; check the object size and rough "
+                           "bound against the arm (--size, --arm, --centre, --radius) or add --directions/--attempts "
+                           f"(report written to {out / 'report.json'})") from None
+        except ReconstructionError as exc:
+            raise RunError(f"reconstruction failed: {exc} (report written to {out / 'report.json'})") from None
+        finally:
+            if bar is not None:
+                bar.close()
+    ex, err = res.exploration, res.error
     if not args.quiet:
         print(f"{opts['object']}: {err.percent:.2f} % error, IoU {err.iou:.3f}, {ex.n_wraps} wraps, "
               f"{len(ex.points)} points, {ex.wall_s:.1f} s -> {out}")
@@ -560,18 +481,15 @@ def cmd_run(args) -> int:
 
 # --- other commands ------------------------------------------------------------------------------
 
-def _extrude(poly, height: float, z0: float = 0.0):
-    import trimesh
-
-    m = trimesh.creation.extrude_polygon(poly, float(height))
-    m.apply_translation([0.0, 0.0, float(z0)])
-    return m
-
-
 def cmd_reconstruct(args) -> int:
+    """The hull input is built as ``run`` builds it (:func:`explore3d.pipeline.hull_input_mask`:
+    the rough bound, then the angular outlier filter over the wrap ids stored in points.ply)."""
     from .export import check_format, points_2d_if_planar, read_points_ply, write_mesh
-    from .hull import inverse_hull
+    from .hull import resolve_centre
     from .io import atomic_write_text
+    from .pipeline import hull_input_mask, reconstruct_points
+
+    import numpy as np
 
     out = Path(args.out)
     suffix = out.suffix.lower().lstrip(".")
@@ -583,22 +501,22 @@ def cmd_reconstruct(args) -> int:
     centre = args.centre
     if args.radius is not None and not isinstance(centre, tuple):
         raise UsageError("--radius needs an explicit --centre x,y[,z] (the rough centre it is measured from, metres)")
-    pts = points_2d_if_planar(read_points_ply(args.points))
+    pts3, props = read_points_ply(args.points, with_properties=True)
+    pts = points_2d_if_planar(pts3)
+    wrap = props.get("wrap", np.zeros(len(pts), dtype=np.int64))
     if isinstance(centre, tuple):
         if len(centre) == 3 and pts.shape[1] == 2:  # a run's rough centre (x, y, z) for its planar points
             centre = centre[:2]
         if len(centre) != pts.shape[1]:
             raise UsageError(f"--centre has {len(centre)} coordinates but the points are {pts.shape[1]}D")
-        if args.radius is not None:
-            from .pipeline import within_bound
-
-            kept = pts[within_bound(pts, centre, args.radius)]
-            if len(kept) <= pts.shape[1]:
-                raise RunError(f"only {len(kept)} of {len(pts)} points lie within --radius {args.radius:g} m of "
-                               f"--centre {','.join(f'{x:g}' for x in centre)}; check both (see report.json's "
-                               "config.centre_m and config.radius_m)")
-            pts = kept
-    hull = inverse_hull(pts, centre=centre, a=args.a, method=args.method)
+    c = resolve_centre(pts, centre)
+    radius = math.inf if args.radius is None else args.radius
+    kept = int(hull_input_mask(pts, wrap, c, radius).sum())
+    if kept <= pts.shape[1]:
+        raise RunError(f"only {kept} of {len(pts)} points lie within --radius {args.radius:g} m of "
+                       f"--centre {','.join(f'{x:g}' for x in c)} and agree with the other wraps; check both (see "
+                       "report.json's config.centre_m and config.radius_m)")
+    hull = reconstruct_points(pts, wrap, c, radius, a=args.a, method=args.method)
     if hull.dim == 2:
         poly = hull.polygon
         if suffix == "json":
@@ -606,7 +524,11 @@ def cmd_reconstruct(args) -> int:
         elif args.height is None:
             raise UsageError("the points are 2D (z = 0): write a polygon with --out X.json or give --height M to extrude")
         else:
-            write_mesh(_extrude(poly, args.height), out, suffix)
+            import trimesh
+
+            m = trimesh.creation.extrude_polygon(poly, float(args.height))
+            m.apply_translation([0.0, 0.0, -0.5 * float(args.height)])  # centred on the points' plane z = 0
+            write_mesh(m, out, suffix)
         print(f"polygon of {len(hull.vertices)} vertices, area {poly.area:.6g} m^2 -> {out}")
     else:
         if suffix == "json":
@@ -668,9 +590,12 @@ def cmd_table1(args) -> int:
         from . import table1
     except ImportError as exc:
         raise RunError(f"explore3d.table1 is not available ({exc}); update explore3d") from None
+    from ._quiet import quiet_c_output
+
     kw = {k: getattr(args, k) for k in ("a", "seed") if getattr(args, k) is not None}
-    rows = table1.table1_rows(**kw)
-    rows3d = table1.table3d_rows(jobs=args.jobs) if args.three_d else None
+    with quiet_c_output():  # PyBullet's banners would come before the table (or the JSON) on stdout
+        rows = table1.table1_rows(**kw)
+        rows3d = table1.table3d_rows(jobs=args.jobs) if args.three_d else None
     if args.json:
         print(_dump(rows if rows3d is None else {"table1": rows, "table3d": rows3d}), end="")
         return 0

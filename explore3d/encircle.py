@@ -215,7 +215,8 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
     """Sweep joint ``k``'s reference (in place in ``q_ref`` (n,), rad) towards ``stop`` rad at up to
     ``speed`` rad/s with motor torque limit ``torque_limit`` N m, until the detector fires
     (``band``; None: never) or the stop is reached.  ``observer(k, reading, lag, sig)`` sees every
-    step's filtered signals (band calibration)."""
+    step's filtered signals; if it returns True or False that is the step's verdict instead of the
+    band's (the band calibration's known-object rule), None keeps the band's."""
     cfg, dt = ctl.cfg, ctl.robot.dt
     n = len(q_ref)
     at_stop = StopReason.STOP_ANGLE if is_base_stop else StopReason.LIMIT
@@ -238,9 +239,10 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
             ctl.traj.append(q)
             ctl.traj_ref.append(q_ref.copy())
         lag, sig = det.update(prev, q_ref, q)
-        if observer is not None:
-            observer(k, ctl.reading, lag, sig)
-        if band is not None and i > 0 and SweepDetector.exceeds(band, k, lag, sig):
+        verdict = None if observer is None else observer(k, ctl.reading, lag, sig)
+        if verdict is None:
+            verdict = band is not None and SweepDetector.exceeds(band, k, lag, sig)
+        if i > 0 and verdict:
             return StopReason.CONTACT
         if q_ref[k] >= stop:
             return at_stop
@@ -256,7 +258,8 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
         band: the contact band; None disables detection.
         base_stop: the base joint's stop angle, rad (None: sweep until contact or limit).
         record: keep the joint readings and references of every sweep step.
-        observer: ``observer(k, reading, lag, sig)`` called at every sweep step (band calibration).
+        observer: ``observer(k, reading, lag, sig)`` called at every sweep step (band calibration;
+            see :func:`sweep_joint`).
     """
     spec: ArmSpec = robot.spec
     n = spec.n_links

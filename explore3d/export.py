@@ -47,22 +47,44 @@ def write_mesh(mesh, path, fmt: str | None = None) -> Path:
     return atomic_write_bytes(path, data)
 
 
-def estimate_urdf(mesh_filename: str, mass: float = 0.1, name: str = "estimate") -> str:
+#: Default density of the estimate body in ``estimate.urdf``, kg/m^3 (about that of wood or a
+#: hollow plastic part: a stated placeholder; the robot does not sense mass).
+DEFAULT_DENSITY_KG_M3 = 500.0
+
+
+def mass_properties(mesh, density: float = DEFAULT_DENSITY_KG_M3) -> tuple[float, np.ndarray, np.ndarray]:
+    """Mass (kg), centre of mass (3,) in the mesh frame (metres) and inertia tensor (3, 3) about
+    the centre of mass in the mesh frame's axes (kg m^2) of ``mesh`` (closed trimesh, metres) filled
+    with a uniform ``density`` kg/m^3.  Raises ValueError for a bad density or a mesh that is
+    not a closed positive volume."""
+    rho = float(density)
+    if not (np.isfinite(rho) and rho > 0):
+        raise ValueError(f"density must be a positive number of kg/m^3; got {density!r}")
+    if not (mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0):
+        raise ValueError("the estimate mesh must be a closed, outward-wound volume to give mass and inertia; "
+                         f"got watertight={mesh.is_watertight}, volume={mesh.volume:.3g} m^3")
+    mp = mesh.mass_properties  # density 1: mass = volume, inertia per unit density
+    return rho * float(mp["volume"]), np.asarray(mp["center_mass"], dtype=float), rho * np.asarray(mp["inertia"])
+
+
+def estimate_urdf(mesh_filename: str, mass: float, com, inertia, name: str = "estimate") -> str:
     """URDF text of one rigid link whose visual and collision geometry is ``mesh_filename``
     (a path relative to the URDF's folder, metres, scale 1).  The link's frame is the mesh's
-    frame; the inertia is a small sphere-like placeholder at the origin (mass in kg)."""
+    frame; ``mass`` kg, centre of mass ``com`` (3,) metres in that frame, ``inertia`` (3, 3)
+    kg m^2 about the centre of mass (:func:`mass_properties`)."""
     mass = float(mass)
     if not (np.isfinite(mass) and mass > 0):
         raise ValueError(f"mass must be a positive number of kg; got {mass!r}")
+    c = np.asarray(com, dtype=float).reshape(3)
+    I = np.asarray(inertia, dtype=float).reshape(3, 3)
     fn = html.escape(str(mesh_filename), quote=True)
-    i = mass * 1e-3  # kg m^2: a ~5 cm body; only used if the object is made dynamic
     return f"""<?xml version="1.0"?>
 <robot name="{html.escape(name, quote=True)}">
   <link name="object">
     <inertial>
-      <origin xyz="0 0 0" rpy="0 0 0"/>
-      <mass value="{mass:g}"/>
-      <inertia ixx="{i:g}" ixy="0" ixz="0" iyy="{i:g}" iyz="0" izz="{i:g}"/>
+      <origin xyz="{c[0]:.9g} {c[1]:.9g} {c[2]:.9g}" rpy="0 0 0"/>
+      <mass value="{mass:.9g}"/>
+      <inertia ixx="{I[0, 0]:.9g}" ixy="{I[0, 1]:.9g}" ixz="{I[0, 2]:.9g}" iyy="{I[1, 1]:.9g}" iyz="{I[1, 2]:.9g}" izz="{I[2, 2]:.9g}"/>
     </inertial>
     <visual>
       <origin xyz="0 0 0" rpy="0 0 0"/>
@@ -78,29 +100,28 @@ def estimate_urdf(mesh_filename: str, mass: float = 0.1, name: str = "estimate")
 """
 
 
-def write_estimate_urdf(mesh_filename, path, mass: float = 0.1, mesh=None) -> Path:
-    """Write a URDF at ``path`` that loads the exported estimate as one rigid body in PyBullet.
+def write_estimate_urdf(mesh_filename, path, mesh, density: float = DEFAULT_DENSITY_KG_M3) -> Path:
+    """Write a URDF at ``path`` that loads the exported estimate as one rigid body in PyBullet,
+    with the mass, centre of mass and inertia of ``mesh`` filled at ``density`` kg/m^3.
 
     Args:
         mesh_filename: the exported mesh, a path relative to ``path``'s folder (or absolute).
         path: the URDF to write.
-        mass: kg.
-        mesh: trimesh.Trimesh; needed only when ``mesh_filename`` is not OBJ/STL (PyBullet reads
-            only those for collision): an OBJ beside it (same stem, ``.obj``) is then written
-            from ``mesh`` and referenced instead.
+        mesh: the estimate (closed trimesh, metres, the frame of ``mesh_filename``).  When
+            ``mesh_filename`` is not OBJ/STL (PyBullet reads only those for collision) an OBJ
+            beside it (same stem, ``.obj``) is written from ``mesh`` and referenced instead.
+        density: kg/m^3 (default :data:`DEFAULT_DENSITY_KG_M3`).
 
     Returns the URDF path.
     """
     path = Path(path)
+    mass, com, inertia = mass_properties(mesh, density)
     fn = Path(mesh_filename)
     if fn.suffix.lower().lstrip(".") not in URDF_MESH_FORMATS:
-        if mesh is None:
-            raise ValueError(f"PyBullet cannot load {fn.suffix or 'suffix-less'} meshes in a URDF; "
-                             "pass mesh= so an OBJ copy is written, or export OBJ/STL")
         fn = fn.with_suffix(".obj")
         target = fn if fn.is_absolute() else path.parent / fn
         write_mesh(mesh, target, "obj")
-    return atomic_write_text(path, estimate_urdf(fn.as_posix(), mass=mass))
+    return atomic_write_text(path, estimate_urdf(fn.as_posix(), mass, com, inertia))
 
 
 def write_points_ply(points, path, wrap=None, attempt=None, link=None, binary: bool = True) -> Path:

@@ -40,9 +40,10 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from explore3d._validate import check_points, check_positive, check_vector
-from explore3d.tolerances import DEGENERACY_RTOL
+from explore3d.defaults import DEFAULT_A
+from explore3d.tolerances import DEGENERACY_RTOL, MERGE_DISTANCE_M
 
-__all__ = ["InverseHull", "inverse_hull", "invert_points", "METHODS", "BACKENDS"]
+__all__ = ["InverseHull", "inverse_hull", "invert_points", "merge_close_points", "METHODS", "BACKENDS"]
 
 #: Inversion methods understood by :func:`invert_points` and :func:`inverse_hull`.
 METHODS = ("exponential", "spherical", "literal")
@@ -73,13 +74,42 @@ def default_radius(r_max: float, a: float) -> float:
     return r_max * (1.0 + a) / (2.0 * a)
 
 
+def merge_close_points(points, distance: float = MERGE_DISTANCE_M) -> np.ndarray:
+    """(n,) int: for each of ``points`` (n, d), metres, the index of the point that represents it
+    once points closer than ``distance`` metres are merged (transitively: a cluster of chained
+    near neighbours is one point); the representative is the cluster's lowest index, so
+    ``np.unique(result)`` are the kept points.  Points of different clusters are farther apart
+    than ``distance``.  ``distance`` = 0 merges nothing.
+    """
+    pts = check_points(points, "points")
+    d = float(distance)
+    if not (np.isfinite(d) and d >= 0):
+        raise ValueError(f"merge distance must be a finite number of metres >= 0; got {distance!r}")
+    n = len(pts)
+    rep = np.arange(n)
+    if d == 0 or n < 2:
+        return rep
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(pts).query_pairs(d, output_type="ndarray")
+    if len(pairs) == 0:
+        return rep
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    first = np.full(label.max() + 1, n)
+    np.minimum.at(first, label, rep)
+    return first[label]
+
+
 def _check_method(method) -> str:
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
     return method
 
 
-def invert_points(points, centre, a: float = 0.2, method: str = "exponential", radius=None) -> np.ndarray:
+def invert_points(points, centre, a: float = DEFAULT_A, method: str = "exponential", radius=None) -> np.ndarray:
     """Invert distances from ``centre`` along each point's own ray.
 
     Args:
@@ -136,7 +166,8 @@ class InverseHull:
         a: coarseness parameter used.
         method: "exponential" | "spherical" | "literal".
         vertices: (k,) int indices into ``points``; 2D: ordered counter-clockwise around the
-            polygon; 3D: sorted, unique.
+            polygon; 3D: sorted, unique.  Only one point of each cluster of points closer than
+            the merge distance is ever a vertex (:func:`merge_close_points`).
         faces: 3D: (m, 3) int indices into ``points``, wound counter-clockwise seen from
             outside (outward normals); 2D: None.
     """
@@ -179,7 +210,8 @@ class InverseHull:
         return self.polygon if self.dim == 2 else self.mesh
 
 
-def _resolve_centre(pts: np.ndarray, centre) -> np.ndarray:
+def resolve_centre(pts: np.ndarray, centre) -> np.ndarray:
+    """The (d,) centre, metres: ``centre`` given as None/"mean", "midrange" or a (d,) point, for ``pts`` (n, d)."""
     if centre is None or (isinstance(centre, str) and centre == "mean"):
         return pts.mean(axis=0)
     if isinstance(centre, str):
@@ -273,7 +305,8 @@ def _orient_outward(inv: np.ndarray, tri: np.ndarray) -> np.ndarray:
 
 
 def inverse_hull(
-    points, centre=None, a: float = 0.2, method: str = "exponential", backend: str = "scipy", radius=None
+    points, centre=None, a: float = DEFAULT_A, method: str = "exponential", backend: str = "scipy", radius=None,
+    merge_distance: float = MERGE_DISTANCE_M,
 ) -> InverseHull:
     """Inverse convex hull of contact points (paper section II).
 
@@ -283,7 +316,8 @@ def inverse_hull(
         centre: None or "mean" (mean of the points), "midrange" (mid-point of the per-axis
             min/max extremes) -- both from the paper -- or an explicit (d,) point in metres,
             same frame.  Must lie strictly inside the convex hull of the points.
-        a: coarseness > 0 (paper: 0.2; smaller is tighter).  See the module docstring.
+        a: coarseness > 0 (default :data:`~explore3d.defaults.DEFAULT_A`, 0.05; the paper: 0.2; smaller is
+            tighter).  See the module docstring.
         method: "exponential" (the paper's intent, |P_inv| = r**-a), "spherical" (Katz, Tal,
             Basri 2007 spherical flipping, |P_inv| = 2R - r) or "literal" (the paper's formula
             as printed, |P_inv| = r**(1 - a): wrong, returns roughly the outer hull; diagnostic only).
@@ -294,6 +328,11 @@ def inverse_hull(
             ``compute_convex_hull``.  Both backends give the same vertex set.
         radius: spherical-flipping radius R in metres (> the largest distance from the centre);
             None picks :func:`default_radius` from ``a``.
+        merge_distance: points closer than this many metres are merged first (one of them, the
+            lowest index, stands for the cluster: :func:`merge_close_points`); default
+            :data:`~explore3d.tolerances.MERGE_DISTANCE_M` (1 um).  Near-coincident points would
+            otherwise give sliver triangles that exported files and their loaders collapse
+            into degenerate faces and non-manifold edges.  0 merges nothing.
 
     Returns:
         :class:`InverseHull`, indexing the input points.
@@ -303,18 +342,23 @@ def inverse_hull(
             inside, a <= 0, unknown method or backend, a point at the centre, Qhull failure).
         ImportError: backend="open3d" and open3d cannot be imported (message names the fix).
     """
-    pts = check_points(points, "points")
-    d = pts.shape[1]
+    all_pts = check_points(points, "points")
+    d = all_pts.shape[1]
     need = d + 1
-    if len(pts) < need:
-        raise ValueError(f"points needs at least {need} points in {d}D for a {d}D hull; got {len(pts)}")
+    if len(all_pts) < need:
+        raise ValueError(f"points needs at least {need} points in {d}D for a {d}D hull; got {len(all_pts)}")
     a = check_positive(a, "a")
     method = _check_method(method)
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}; got {backend!r}")
     if backend == "open3d" and d != 3:
         raise ValueError("backend='open3d' handles 3D points only; use backend='scipy' for 2D")
-    c = _resolve_centre(pts, centre)
+    c = resolve_centre(all_pts, centre)
+    kept = np.unique(merge_close_points(all_pts, merge_distance))  # indices into all_pts
+    pts = all_pts[kept]
+    if len(pts) < need:
+        raise ValueError(f"points needs at least {need} points in {d}D for a {d}D hull; got {len(pts)} once "
+                         f"points closer than {merge_distance:g} m are merged ({len(all_pts)} given)")
     diag = _check_not_degenerate(pts)
     _check_centre_inside(pts, c, diag)
     if method == "spherical" and radius is None:
@@ -330,7 +374,7 @@ def inverse_hull(
             signed_area = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
             if signed_area < 0:
                 verts = verts[::-1]
-            return InverseHull(pts, c, a, method, verts, None)
+            return InverseHull(all_pts, c, a, method, kept[verts], None)
 
         if backend == "scipy":
             hull = _qhull(inv, f"{method}-inverted points")
@@ -339,4 +383,4 @@ def inverse_hull(
         else:
             verts, tri = _hull_open3d(pts, c, inv, method, radius)
         faces = _orient_outward(inv, tri)
-    return InverseHull(pts, c, a, method, verts, faces)
+    return InverseHull(all_pts, c, a, method, kept[verts], kept[faces])

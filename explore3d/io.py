@@ -41,3 +41,25 @@ def atomic_write_bytes(path, data: bytes) -> Path:
 def atomic_write_text(path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically; returns the path."""
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer, np.bool_)):
+        return o.item()
+    if hasattr(o, "value"):  # enums
+        return o.value
+    if isinstance(o, (set, frozenset, tuple)):
+        return list(o)
+    return str(o)
+
+
+def json_text(obj) -> str:
+    """``obj`` as indented JSON text ending in a newline (numpy arrays and scalars, enums and
+    tuples converted); the one JSON writer of report.json, the command line and the scripts."""
+    import json
+
+    return json.dumps(obj, indent=2, default=_json_default) + "\n"

@@ -147,6 +147,13 @@ def views_figure(estimate_mesh, truth_mesh, path, points=None, err=None, title: 
 def scene_image(truth_mesh, spec, attempt, width: int = 480, height: int = 360) -> np.ndarray:
     """(height, width, 3) uint8 RGB image from PyBullet's TinyRenderer (DIRECT client) of the truth
     mesh (metres, world frame) and the arm ``spec`` at ``attempt.q`` (rad) on ``attempt.T_world_base``."""
+    from ._quiet import quiet_c_output
+
+    with quiet_c_output():  # PyBullet's banners: import, connect, the renderer
+        return _scene_image(truth_mesh, spec, attempt, width, height)
+
+
+def _scene_image(truth_mesh, spec, attempt, width: int, height: int) -> np.ndarray:
     import pybullet as p
 
     from .urdf import arm_urdf

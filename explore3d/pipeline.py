@@ -13,7 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .defaults import DEFAULT_A
 from .explore import Exploration, ExploreConfig, explore, rough_bound
+from .export import DEFAULT_DENSITY_KG_M3
 
 
 @dataclass(frozen=True)
@@ -74,24 +76,65 @@ def exploration_summary(ex: Exploration) -> dict:
             "wall_s": float(ex.wall_s), "sim_s": float(ex.sim_time_s), "steps": int(ex.steps)}
 
 
-def write_result(result: Result, mesh, out, fmt: str = "obj", pictures: bool = True) -> list[str]:
+def sensed_z_band(ex: Exploration) -> tuple[float, float]:
+    """The heights (z_lo, z_hi), world frame, metres, that a planar exploration's links swept: the
+    arm planes' z (of the wrap base poses) +- half the link height.  All the robot sensed of the
+    object's height; planar estimates are extruded over it, never over the true mesh's height."""
+    z = np.array([float(np.asarray(p.T_world_base)[2, 3]) for p in ex.poses])
+    h = 0.5 * float(ex.spec.link_height)
+    return float(z.min()) - h, float(z.max()) + h
+
+
+def extrusion_band(ex: Exploration, height: float | None = None) -> tuple[float, float]:
+    """(z_lo, z_hi), world frame, metres, over which a planar estimate is extruded: the arm's
+    :func:`sensed_z_band`, or ``height`` metres centred on it when given."""
+    zlo, zhi = sensed_z_band(ex)
+    if height is None:
+        return zlo, zhi
+    from ._validate import check_positive
+
+    h = check_positive(height, "height (the extrusion height of a planar estimate, metres)")
+    zc = 0.5 * (zlo + zhi)
+    return zc - 0.5 * h, zc + 0.5 * h
+
+
+def estimate_mesh(result: Result, height: float | None = None):
+    """The estimate as a closed trimesh, world frame, metres.  3D: the inverse hull's mesh.
+    Planar: the polygon extruded over :func:`extrusion_band` (the arm's sensed height band, or
+    ``height`` metres centred on the arm's plane: the user's own knowledge of the object)."""
+    import trimesh
+
+    est = result.estimate
+    if result.exploration.config.mode != "planar":
+        return est
+    zlo, zhi = extrusion_band(result.exploration, height)
+    m = trimesh.creation.extrude_polygon(est, zhi - zlo)
+    m.apply_translation([0.0, 0.0, zlo])
+    return m
+
+
+def write_result(result: Result, mesh, out, fmt: str = "obj", pictures: bool = True, *,
+                 density: float | None = None, height: float | None = None) -> list[str]:
     """Write a run's files into folder ``out`` (created) and return their names:
 
-    * ``estimate.<fmt>`` (obj, stl, ply, off, glb): the estimate mesh, world frame, metres; planar
-      runs: the polygon extruded over ``mesh``'s z range; ``estimate.urdf`` loading it in PyBullet
-      (plus ``estimate.obj`` when ``fmt`` is not obj/stl);
+    * ``estimate.<fmt>`` (obj, stl, ply, off, glb): the estimate mesh (:func:`estimate_mesh`),
+      world frame, metres; one closed, outward-wound volume that reloads as such with the
+      loaders' default settings; planar runs: the polygon extruded over the arm's sensed height
+      band (or ``height`` metres); ``estimate.urdf`` loading it in PyBullet with the mass and
+      inertia of the estimate filled at ``density`` kg/m^3 (default
+      :data:`~explore3d.export.DEFAULT_DENSITY_KG_M3`) (plus ``estimate.obj`` when ``fmt`` is not
+      obj/stl);
     * ``estimate_polygon.json`` (planar): the polygon as a list of [x, y], metres, counter-clockwise;
     * ``points.ply``: the link points with their wrap, attempt and link;
     * ``figure.png``/``views.png``, ``overview.png``, ``scene.png`` with ``pictures=True``.
 
-    ``mesh`` is the explored object (closed trimesh, metres).  Files are written atomically.
+    ``mesh`` is the explored object (closed trimesh, metres), used for the pictures only.  Files
+    are written atomically.
     """
     import json
     from pathlib import Path
 
-    import trimesh
-
-    from .export import check_format, write_estimate_urdf, write_mesh, write_points_ply
+    from .export import DEFAULT_DENSITY_KG_M3, check_format, write_estimate_urdf, write_mesh, write_points_ply
     from .io import atomic_write_text
 
     fmt = check_format(fmt)
@@ -104,14 +147,11 @@ def write_result(result: Result, mesh, out, fmt: str = "obj", pictures: bool = T
         ring = [[float(x), float(y)] for x, y in list(estimate.exterior.coords)[:-1]]
         atomic_write_text(out / "estimate_polygon.json", json.dumps(ring, indent=2) + "\n")
         names.append("estimate_polygon.json")
-        zlo, zhi = mesh.bounds[:, 2]
-        est_mesh = trimesh.creation.extrude_polygon(estimate, float(zhi - zlo))
-        est_mesh.apply_translation([0.0, 0.0, float(zlo)])
-    else:
-        est_mesh = estimate
+    est_mesh = estimate_mesh(result, height)
     mesh_name = f"estimate.{fmt}"
     write_mesh(est_mesh, out / mesh_name, fmt)
-    write_estimate_urdf(mesh_name, out / "estimate.urdf", mesh=est_mesh)
+    write_estimate_urdf(mesh_name, out / "estimate.urdf", est_mesh,
+                        density=DEFAULT_DENSITY_KG_M3 if density is None else density)
     names += [mesh_name, "estimate.urdf"] + ([] if fmt in ("obj", "stl") else ["estimate.obj"])  # PyBullet's copy
     if pictures:
         from . import pictures as pics
@@ -184,26 +224,39 @@ def angular_outliers(points, centre, groups, ratio: float = OUTLIER_RATIO, k: in
     return out
 
 
-def hull_input_mask(ex: Exploration, centre, radius: float, outlier_ratio: float | None = OUTLIER_RATIO) -> np.ndarray:
-    """(m,) bool mask of the exploration's points the reconstruction uses: within ``radius`` metres
-    of the rough ``centre`` and, unless ``outlier_ratio`` is None, not an :func:`angular_outliers`."""
-    keep = within_bound(ex.points, centre, radius)
+def hull_input_mask(points, wrap, centre, radius: float, outlier_ratio: float | None = OUTLIER_RATIO) -> np.ndarray:
+    """(m,) bool mask of the link ``points`` (m, d), metres, the reconstruction uses: within
+    ``radius`` metres of the rough ``centre`` (3,) (its first d components) and, unless
+    ``outlier_ratio`` is None, not :func:`angular_outliers` among the points of other ``wrap``
+    ids (m,) int (all zeros: no outlier can be found).  ``explore3d run`` and ``explore3d
+    reconstruct`` both build their hull input with it (points.ply carries the wrap ids)."""
+    P = np.asarray(points, dtype=float)
+    keep = within_bound(P, centre, radius)
     if outlier_ratio is not None and keep.any():
         idx = np.nonzero(keep)[0]
-        keep[idx[angular_outliers(ex.points[idx], centre, ex.point_wrap[idx], outlier_ratio)]] = False
+        keep[idx[angular_outliers(P[idx], np.asarray(centre, dtype=float)[: P.shape[1]], np.asarray(wrap)[idx],
+                                  outlier_ratio)]] = False
     return keep
 
 
-def reconstruct_exploration(ex: Exploration, centre, radius: float, a: float = 0.05, method: str = "exponential",
+def reconstruct_points(points, wrap, centre, radius: float, a: float = DEFAULT_A, method: str = "exponential",
+                       outlier_ratio: float | None = OUTLIER_RATIO):
+    """Inverse hull of link ``points`` (m, d), metres, with their ``wrap`` ids (m,) about the rough
+    ``centre`` (3,) (planar points use its x-y), from the points :func:`hull_input_mask` keeps."""
+    from .hull import inverse_hull
+
+    P = np.asarray(points, dtype=float)
+    c = np.asarray(centre, dtype=float)[: P.shape[1]]
+    return inverse_hull(P[hull_input_mask(P, wrap, centre, radius, outlier_ratio)], centre=c, a=a, method=method)
+
+
+def reconstruct_exploration(ex: Exploration, centre, radius: float, a: float = DEFAULT_A, method: str = "exponential",
                             outlier_ratio: float | None = OUTLIER_RATIO):
     """Inverse hull of an exploration's points about the rough ``centre`` (3,), dropping points
     farther than ``radius`` metres from it and points far inside what other wraps saw in the same
-    direction (:func:`hull_input_mask`).  Planar explorations use the x-y components."""
-    from .hull import inverse_hull
-
-    c = np.asarray(centre, dtype=float)[: ex.points.shape[1]]
-    P = ex.points[hull_input_mask(ex, centre, radius, outlier_ratio)]
-    return inverse_hull(P, centre=c, a=a, method=method)
+    direction (:func:`reconstruct_points`).  Planar explorations use the x-y components."""
+    return reconstruct_points(ex.points, ex.point_wrap, centre, radius, a=a, method=method,
+                              outlier_ratio=outlier_ratio)
 
 
 def planar_truth(mesh, z: float):
@@ -243,7 +296,7 @@ def rough_bound_or(mesh, centre=None, radius=None) -> tuple[np.ndarray, float]:
     return c, r
 
 
-def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float = 0.05,
+def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float = DEFAULT_A,
         method: str = "exponential", progress=None, *, centre=None, radius=None, seed: int = 0) -> Result:
     """Explore ``mesh`` (closed trimesh, metres) with ``arm``, reconstruct, and score.
 
@@ -278,7 +331,7 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
         hull = reconstruct_exploration(ex, centre, radius, a=a, method=method)
     except ValueError as exc:
         what = str(exc).split("; ")[0]  # inverse_hull's own fix hints are about its arguments, not the run
-        n_used = int(hull_input_mask(ex, centre, radius).sum())
+        n_used = int(hull_input_mask(ex.points, ex.point_wrap, centre, radius).sum())
         raise ReconstructionError(
             f"no shape from the {n_used} link points within {radius:.3g} m of the rough centre ({what}); "
             "explore from more directions or with more attempts (ExploreConfig directions/attempts, --directions/"
@@ -287,3 +340,170 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
     truth = planar_truth(mesh, float(centre[2])) if config.mode == "planar" else mesh
     return Result(exploration=ex, hull=hull, truth=truth, error=shape_error(hull.shape(), truth, seed=seed),
                   centre=centre, radius=radius, n_points_used=len(hull.points))  # the hull's input
+
+
+# --- a complete run: what `explore3d run` does -------------------------------------------------------
+
+@dataclass(frozen=True)
+class OutputConfig:
+    """What :func:`run_and_report` writes besides report.json.
+
+    Attributes:
+        fmt: estimate mesh format, one of :data:`~explore3d.export.MESH_FORMATS`.
+        pictures: write the PNG pictures.
+        quality: compute the contact-quality figures (:func:`~explore3d.quality.contact_quality`:
+            evaluation only, against the true mesh, after the run).  Off by default: they need
+            the recorded trajectories and cost more than the exploration (measured on 2 cores:
+            cube 45 s exploring + 33 s quality; duck 34 s + 13 min).
+        density: of the estimate body in estimate.urdf, kg/m^3.
+        height: planar runs: extrude the estimate polygon over this many metres centred on the
+            arm's plane; None: over the arm's sensed height band (:func:`sensed_z_band`).
+    """
+
+    fmt: str = "obj"
+    pictures: bool = True
+    quality: bool = False
+    density: float = DEFAULT_DENSITY_KG_M3
+    height: float | None = None
+
+    def __post_init__(self):
+        from .export import check_format
+
+        object.__setattr__(self, "fmt", check_format(self.fmt))
+        for name in ("pictures", "quality"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be True or False; got {getattr(self, name)!r}")
+        d = self.density
+        if isinstance(d, bool) or not isinstance(d, (int, float)) or not (math.isfinite(d) and d > 0):
+            raise ValueError(f"density must be a positive number of kg/m^3; got {d!r}")
+        h = self.height
+        if h is not None and (isinstance(h, bool) or not isinstance(h, (int, float)) or not (math.isfinite(h) and h > 0)):
+            raise ValueError(f"height must be None or a positive number of metres; got {h!r}")
+
+
+def package_versions() -> dict:
+    """Versions of explore3d and its main dependencies (for report.json)."""
+    from importlib import metadata
+
+    from . import __version__
+
+    out = {"explore3d": __version__}
+    for name in ("numpy", "scipy", "trimesh", "pybullet", "shapely"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(), out=None, *,
+                   output: OutputConfig = OutputConfig(), a: float = DEFAULT_A, method: str = "exponential",
+                   seed: int = 0, centre=None, radius=None, calibrate: bool = False, progress=None,
+                   object_name: str = "object", source: dict | None = None) -> tuple[Result, dict]:
+    """Explore, reconstruct and score ``mesh`` like :func:`run`, then write report.json and the
+    files of :func:`write_result` into folder ``out``: what ``explore3d run`` does.
+
+    Args:
+        mesh, arm, config, a, method, seed, centre, radius, progress: as for :func:`run`.
+        out: output folder (created).
+        output: what to write (:class:`OutputConfig`).
+        calibrate: first calibrate the contact thickness on the known 60 mm ball
+            (:func:`~explore3d.calibration.calibrate_thickness`, never ``mesh``) and explore with it.
+        object_name: how the report names the object; source: more facts about how ``mesh`` was
+            made (e.g. ``{"scale": ..., "size": ...}``), copied into ``report["config"]``.
+
+    Returns:
+        the :class:`Result` and the report (the dict written to ``out/report.json``).  Its
+        ``timings`` (seconds): ``calibration_s``, ``explore_s`` (the exploration), ``run_s``
+        (exploration, reconstruction and scoring), ``quality_s`` (only with ``output.quality``),
+        ``write_s`` (files and pictures), ``total_s``.
+
+    Raises:
+        NoContactError, ReconstructionError: as :func:`run`, after writing report.json (with an
+            ``error`` entry) and points.ply (if any points) into ``out``.
+    """
+    import dataclasses
+    import time
+    from pathlib import Path
+
+    from .arm import load_arm
+    from .export import write_points_ply
+    from .io import atomic_write_text, json_text
+
+    if out is None:
+        raise ValueError("run_and_report needs an output folder: pass out=")
+    if not isinstance(output, OutputConfig):
+        raise ValueError(f"output must be an OutputConfig; got {type(output).__name__}")
+    t_start = time.perf_counter()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    spec = load_arm(arm)
+    bound_given = centre is not None or radius is not None
+    centre, radius = rough_bound_or(mesh, centre, radius)
+    timings = {}
+    report = {
+        "object": object_name, "mode": config.mode, "arm": arm if isinstance(arm, str) else spec.name,
+        "a": a, "method": method,
+        "config": {"explore": config.to_dict(), "arm": spec.to_dict(), "a": a, "method": method, "seed": seed,
+                   "centre_m": [float(x) for x in centre], "radius_m": float(radius),
+                   "rough_bound": "given" if bound_given else "rough_bound(mesh)",
+                   "format": output.fmt, "pictures": output.pictures, "quality": output.quality,
+                   "density_kg_m3": float(output.density), "height_m": output.height, **(source or {})},
+        "versions": package_versions(),
+        "timings": timings,
+    }
+    if calibrate:
+        from .calibration import calibrate_thickness
+
+        t0 = time.perf_counter()
+        cal = calibrate_thickness(spec, config)
+        timings["calibration_s"] = time.perf_counter() - t0
+        config = dataclasses.replace(config, face_offset=cal.face_offset_m)
+        report["calibration"] = cal.to_dict()
+        report["config"]["explore"] = config.to_dict()
+    if output.quality:  # the quality figures read the recorded trajectories
+        config = dataclasses.replace(config, record=True)
+        report["config"]["explore"] = config.to_dict()
+
+    def finish():
+        timings["total_s"] = time.perf_counter() - t_start
+        atomic_write_text(out / "report.json", json_text(report))
+
+    t0 = time.perf_counter()
+    try:
+        res = run(mesh, spec, config, a=a, method=method, progress=progress, centre=centre, radius=radius,
+                  seed=seed)
+    except (NoContactError, ReconstructionError) as exc:
+        ex = exc.exploration
+        timings["run_s"] = time.perf_counter() - t0
+        if ex is not None:
+            timings["explore_s"] = float(ex.wall_s)
+            report.update(exploration_summary(ex))
+            if len(ex.points):
+                write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
+        report["error"] = str(exc)
+        finish()
+        raise
+    timings["run_s"] = time.perf_counter() - t0
+    timings["explore_s"] = float(res.exploration.wall_s)
+    summary = res.summary()
+    for k in ("centre_m", "radius_m"):  # already in config
+        summary.pop(k)
+    report.update(summary)
+    report["errors"] = res.error.to_dict()
+    if config.mode == "planar":
+        report["section_z_m"] = float(res.centre[2])  # the arm's plane passes through the rough centre
+        report["estimate_z_band_m"] = list(extrusion_band(res.exploration, output.height))
+    if output.quality:
+        from .quality import contact_quality
+
+        t0 = time.perf_counter()
+        report["contact_quality"] = contact_quality(res.exploration, mesh).to_dict()  # evaluation only
+        timings["quality_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    files = write_result(res, mesh, out, output.fmt, pictures=output.pictures, density=output.density,
+                         height=output.height)
+    timings["write_s"] = time.perf_counter() - t0
+    report["files"] = sorted(files + ["report.json"])
+    finish()
+    return res, report

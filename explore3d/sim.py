@@ -84,17 +84,20 @@ class ArmSimulation:
     """
 
     def __init__(self, spec: ArmSpec, vertices=None, faces=None, config: SimConfig = SimConfig()):
-        import pybullet
-        from pybullet_utils import bullet_client
+        from ._quiet import quiet_c_output
 
         self.spec = spec
         self.config = config
-        self._p = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
-        p = self._p
-        p.setGravity(*config.gravity)
-        p.setTimeStep(config.timestep)
-        if config.solver == "dantzig":
-            p.setPhysicsEngineParameter(constraintSolverType=pybullet.CONSTRAINT_SOLVER_LCP_DANTZIG)
+        with quiet_c_output():  # PyBullet's C-level banners: build time, argv[0]=, solver switch
+            import pybullet
+            from pybullet_utils import bullet_client
+
+            self._p = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
+            p = self._p
+            p.setGravity(*config.gravity)
+            p.setTimeStep(config.timestep)
+            if config.solver == "dantzig":
+                p.setPhysicsEngineParameter(constraintSolverType=pybullet.CONSTRAINT_SOLVER_LCP_DANTZIG)
         p.setPhysicsEngineParameter(deterministicOverlappingPairs=1)
         fd, path = tempfile.mkstemp(suffix=".urdf", prefix=f"explore3d_{spec.name}_")
         try:

@@ -25,6 +25,7 @@ import trimesh
 from shapely.geometry import Polygon
 
 from explore3d._validate import check_positive
+from explore3d.defaults import PAPER_A
 from explore3d.hull import InverseHull, inverse_hull
 from explore3d.metrics import ShapeError, shape_error
 from explore3d.tolerances import SURFACE_ATOL_M
@@ -222,7 +223,7 @@ class SimulatedCase:
 
 
 def simulated_case(shape, n_links: int = 320, link_length: float = 0.008, points_per_link: int = 5,
-                   a: float = 0.2, method: str = "exponential", centre="mean", seed: int = 0) -> SimulatedCase:
+                   a: float = PAPER_A, method: str = "exponential", centre="mean", seed: int = 0) -> SimulatedCase:
     """Run the paper's simulated experiment on ``shape`` (Fig. 10, Table I "Simulated Cube").
 
     ``n_links`` random links of ``link_length`` metres are laid against ``shape`` (see

@@ -7,6 +7,8 @@ and our default many-small-links arm for comparison.  Area errors in m^2, a = 0.
 """
 from __future__ import annotations
 
+from .defaults import DEFAULT_A, PAPER_A
+
 #: (case, paper area error m^2, paper percent) from Table I of the paper.
 PAPER_TABLE_I = {
     "Cube one direction": (0.0026, 40.6),
@@ -17,7 +19,7 @@ PAPER_TABLE_I = {
 }
 
 
-def _planar_row(case, obj, arm, directions, mirrored, attempts=4, a=0.2):
+def _planar_row(case, obj, arm, directions, mirrored, attempts=4, a=PAPER_A):
     from .explore import ExploreConfig
     from .objects import load_object
     from .pipeline import run
@@ -29,7 +31,7 @@ def _planar_row(case, obj, arm, directions, mirrored, attempts=4, a=0.2):
             "area_error_m2": res.error.sym_diff, "percent": res.error.percent}
 
 
-def table1_rows(a: float = 0.2, seed: int = 0) -> list[dict]:
+def table1_rows(a: float = PAPER_A, seed: int = 0) -> list[dict]:
     """The reproduced rows (list of dicts with case, arm, paper_area_error_m2, paper_percent,
     area_error_m2, percent)."""
     from .objects import square
@@ -58,7 +60,7 @@ def table1_rows(a: float = 0.2, seed: int = 0) -> list[dict]:
 TABLE_3D_OBJECTS = (("3D cube 80 mm", "cube"), ("3D cylinder r 63 mm", "cylinder"), ("3D sphere r 50 mm", "sphere"))
 
 
-def table3d_rows(a: float = 0.05, arm="default", config=None, calibrate: bool = True, jobs: int | None = None,
+def table3d_rows(a: float = DEFAULT_A, arm="default", config=None, calibrate: bool = True, jobs: int | None = None,
                  progress=None) -> list[dict]:
     """The default arm's 3D volume errors on the cube, the cylinder and the sphere.
 

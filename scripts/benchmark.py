@@ -13,6 +13,7 @@ import numpy as np
 
 from explore3d import ArmSpec, ExploreConfig, load_arm, load_object, run
 from explore3d.band import cached_band
+from explore3d.defaults import DEFAULT_A
 from explore3d.encircle import ControlConfig, run_wrap
 from explore3d.explore import planar_wrap_poses, rough_bound
 from explore3d.robot import JointCommand, RecordingRobot
@@ -73,7 +74,7 @@ def main():
     if not args.skip_3d:
         cfg = ExploreConfig(jobs=None)
         t0 = time.perf_counter()
-        res = run(load_object("cube"), "default", cfg, a=0.05)
+        res = run(load_object("cube"), "default", cfg, a=DEFAULT_A)
         print(f"\n3D default on the cube: {res.exploration.n_wraps} wraps, {res.exploration.steps} steps, "
               f"{time.perf_counter() - t0:.1f} s wall, volume error {res.error.percent:.1f}%, IoU {res.error.iou:.3f}")
 

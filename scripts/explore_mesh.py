@@ -14,7 +14,8 @@ import json
 import sys
 from pathlib import Path
 
-from explore3d import ExploreConfig, load_object, run, write_result
+from explore3d import ExploreConfig, load_object, quiet_c_output, run, write_result
+from explore3d.defaults import DEFAULT_A
 
 
 def _positive(text):
@@ -30,7 +31,7 @@ def options(description: str) -> argparse.ArgumentParser:
     p.add_argument("--out", help="output folder (default: runs/<name>)")
     p.add_argument("--mode", choices=("3d", "planar"), default="3d", help="3d (default) or planar")
     p.add_argument("--arm", default="default", help="built-in arm (paper, default) or a URDF path")
-    p.add_argument("--a", type=_positive, default=0.2, help="inverse-hull coarseness > 0 (default 0.2)")
+    p.add_argument("--a", type=_positive, default=DEFAULT_A, help=f"inverse-hull coarseness > 0 (default {DEFAULT_A})")
     p.add_argument("--seed", type=int, default=0, help="seed of the error measure's surface samples")
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     p.add_argument("--quick", action="store_true", help="a tiny exploration (3 wraps, 1 attempt) that runs in seconds")
@@ -50,8 +51,9 @@ def exploration_config(args) -> ExploreConfig:
 
 def explore_object(name: str, mesh, args, out) -> dict:
     """Run, write the files and summary.json into ``out``, print one line; returns the summary."""
-    res = run(mesh, args.arm, exploration_config(args), a=args.a, seed=args.seed)
-    files = write_result(res, mesh, out, pictures=not args.no_pictures)
+    with quiet_c_output():  # PyBullet's C-level banners; Python's own output still shows
+        res = run(mesh, args.arm, exploration_config(args), a=args.a, seed=args.seed)
+        files = write_result(res, mesh, out, pictures=not args.no_pictures)
     summary = {"object": name, "mode": args.mode, "arm": args.arm, "a": args.a, "seed": args.seed,
                "quick": args.quick, **res.summary(), "files": files + ["summary.json"]}
     Path(out, "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")

@@ -18,10 +18,11 @@ import time
 
 from explore3d import ExploreConfig, explore, load_object, run
 from explore3d.calibration import calibrate_thickness
+from explore3d.defaults import DEFAULT_A
 from explore3d.quality import contact_quality
 from explore3d.replay import diagnose_false_detections
 
-A = 0.05  # inverse-hull coarseness of the scored reconstructions
+A = DEFAULT_A  # inverse-hull coarseness of the scored reconstructions (explore3d.defaults)
 
 
 def config_for(mode: str, jobs: int, **kw) -> ExploreConfig:

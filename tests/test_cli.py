@@ -198,7 +198,7 @@ def test_run_no_contacts_writes_report(tmp_path, capsys, small_arm):
     assert code == 1
     assert_one_line_error(err, "no contacts", "--centre", "--size", "--arm")
     report = json.loads((out / "report.json").read_text())
-    assert "no contacts" in report["error"]
+    assert "no contact" in report["error"] and "--centre" in report["error"]  # the library's message
     assert report["n_contacts"] == 0 and report["n_wraps"] == 1 and report["steps"] > 0
     assert "percent_error" not in report
     assert (out / "points.ply").exists() == (report["n_points"] > 0)
@@ -330,7 +330,7 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     assert main(["arm", "--out", str(arm), "--n-links", "8", "--link-length", "0.02"]) == 0
     out = tmp_path / "out"
     code, stdout, err = run(capsys, "run", "cube", "--out", str(out), "--arm", str(arm), "--mode", "planar",
-                            "--directions", "3", "--attempts", "1", "--format", "off", "-q")
+                            "--directions", "3", "--attempts", "1", "--format", "off", "--quality", "-q")
     assert code == 0, err
     report = json.loads((out / "report.json").read_text())
     assert report["object"] == "cube" and report["mode"] == "planar" and report["n_wraps"] == 3
@@ -340,6 +340,9 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     assert ch["size"] >= report["estimate_size"] * (1 - 1e-9) and len(ch["centre_m"]) == 2
     assert np.hypot(*ch["centre_m"]) < 0.01
     # the contact-quality figures, evaluated after the run against the true cube
+    assert report["config"]["quality"] and report["config"]["explore"]["record"]
+    assert 0 < report["timings"]["quality_s"] < report["timings"]["total_s"]
+    assert report["timings"]["explore_s"] <= report["timings"]["run_s"] <= report["timings"]["total_s"]
     cq = report["contact_quality"]
     assert cq["n_detections"] == report["n_contacts"] and cq["n_attempts"] == 3
     assert 0.0 <= cq["false_fraction"] <= 1.0 and cq["penetration_max_m"] < 1e-3
@@ -355,9 +358,12 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     assert report["percent_error"] == pytest.approx(err_.percent, rel=1e-9)
     assert report["true_size"] == pytest.approx(0.08 ** 2)
 
-    # extruded estimate: the polygon times the cube's height
+    # extruded estimate: the polygon over the arm's sensed height band (its plane +- half a link height)
     m = trimesh.load(str(out / "estimate.off"))
-    assert m.volume == pytest.approx(poly.area * 0.08, rel=1e-5)
+    h = report["config"]["arm"]["link_height"]
+    np.testing.assert_allclose(report["estimate_z_band_m"], [-h / 2, h / 2], atol=1e-12)
+    np.testing.assert_allclose(m.bounds[:, 2], [-h / 2, h / 2], atol=1e-7)
+    assert m.volume == pytest.approx(poly.area * h, rel=1e-5)
 
     pts, props = read_points_ply(out / "points.ply", with_properties=True)
     assert len(pts) == report["n_points"]
@@ -456,7 +462,7 @@ def test_run_every_object(tmp_path, capsys, small_arm, obj, mode):
     if mode == "planar":
         ring = np.array(json.loads((out / "estimate_polygon.json").read_text()))
         assert np.linalg.norm(ring - c[:2], axis=1).max() <= radius * (1 + 1e-12)
-        assert est.volume == pytest.approx(report["estimate_size"] * mesh.extents[2], rel=1e-5)
+        assert est.volume == pytest.approx(report["estimate_size"] * report["config"]["arm"]["link_height"], rel=1e-5)
     else:
         assert np.linalg.norm(est.vertices - c, axis=1).max() <= radius + 1e-7  # OBJ keeps 8 decimals
         assert est.volume == pytest.approx(report["estimate_size"], rel=1e-5)
@@ -524,7 +530,6 @@ def test_run_calibrate_applies_the_ball_calibration(tmp_path, capsys, small_arm)
     assert 0 < off < 0.002 and cal["calibration"]["n_points"] > 0
     assert cal["config"]["explore"]["face_offset"] == off and raw["config"]["explore"]["face_offset"] == 0.0
     assert cal["n_contacts"] == raw["n_contacts"]  # the offset moves points, not the arm
-    assert cal["contact_quality"]["face_offset_m"] == off
     assert cal["estimate_size"] < raw["estimate_size"]
 
 
@@ -532,3 +537,134 @@ def test_run_calibrate_and_face_offset_exclude_each_other(tmp_path, capsys):
     code, _, err = run(capsys, "run", "cube", "--out", str(tmp_path / "o"), "--calibrate", "--face-offset", "0.001")
     assert code == 2
     assert_one_line_error(err, "--calibrate")
+
+
+# --- issue 9: outputs a user can load and trust ------------------------------------------------------
+
+def test_quality_figures_are_opt_in(tmp_path, capsys, small_arm):
+    """Without --quality: no contact-quality figures, no recorded trajectories, no quality time;
+    --no-quality (the default) is still accepted; --quality and --no-quality exclude each other."""
+    common = ["run", "cube", "--arm", str(small_arm), "--mode", "planar", "--directions", "3", "--attempts", "1",
+              "--no-pictures", "-q"]
+    for extra in ([], ["--no-quality"]):
+        out = tmp_path / f"o{len(extra)}"
+        code, _, err = run(capsys, *common, "--out", str(out), *extra)
+        assert code == 0, err
+        report = json.loads((out / "report.json").read_text())
+        assert "contact_quality" not in report and "quality_s" not in report["timings"]
+        assert report["config"]["quality"] is False and report["config"]["explore"]["record"] is False
+        assert set(report["timings"]) == {"explore_s", "run_s", "write_s", "total_s"}
+    code, _, err = run(capsys, *common, "--out", str(tmp_path / "x"), "--quality", "--no-quality")
+    assert code == 2
+    assert_one_line_error(err, "--no-quality")
+
+
+def test_default_a_is_one_value_outside_the_paper_replica():
+    """One default coarseness (explore3d.defaults.DEFAULT_A) everywhere; the paper's 0.2 only in its replica."""
+    import importlib.util
+    import inspect
+
+    from explore3d import hull, pipeline, simulated, table1
+    from explore3d.cli import RUN_DEFAULTS
+    from explore3d.defaults import DEFAULT_A, PAPER_A
+
+    def default(f):
+        return inspect.signature(f).parameters["a"].default
+
+    for f in (pipeline.run, pipeline.run_and_report, pipeline.reconstruct_exploration, pipeline.reconstruct_points,
+              hull.inverse_hull, hull.invert_points, table1.table3d_rows):
+        assert default(f) == DEFAULT_A, f.__name__
+    assert RUN_DEFAULTS["a"] == DEFAULT_A
+    assert build_parser().parse_args(["reconstruct", "p.ply", "--out", "m.obj"]).a == DEFAULT_A
+    spec = importlib.util.spec_from_file_location("explore_mesh", Path(__file__).parents[1] / "scripts" / "explore_mesh.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert script.options("x").parse_args([]).a == DEFAULT_A
+    assert default(table1.table1_rows) == PAPER_A and default(simulated.simulated_case) == PAPER_A
+    assert (DEFAULT_A, PAPER_A) == (0.05, 0.2)
+
+
+def test_reconstruct_builds_the_hull_input_as_run_does(tmp_path, capsys, small_arm):
+    """``explore3d reconstruct`` on a run's points.ply with the run's rough bound and a gives the run's
+    estimate: the same rough-bound cut and the same angular outlier filter over the wrap ids in the
+    file.  (This star-prism run has 10 outliers among its 574 points within the rough bound.)"""
+    from explore3d.export import read_points_ply
+    from explore3d.pipeline import within_bound
+
+    out = tmp_path / "o"
+    code, _, err = run(capsys, "run", "star_prism", "--out", str(out), "--arm", str(small_arm), *_FAST["3d"],
+                       "--no-pictures", "-q")
+    assert code == 0, err
+    report = json.loads((out / "report.json").read_text())
+    pts = read_points_ply(out / "points.ply")
+    n_bound = int(within_bound(pts, report["config"]["centre_m"], report["config"]["radius_m"]).sum())
+    assert report["n_points_used"] < n_bound  # the filter dropped points: the comparison can tell
+    centre = ",".join(repr(x) for x in report["config"]["centre_m"])
+    code, _, err = run(capsys, "reconstruct", str(out / "points.ply"), "--out", str(tmp_path / "re.obj"),
+                       "--a", repr(report["a"]), "--centre", centre, "--radius", repr(report["config"]["radius_m"]))
+    assert code == 0, err
+    again, est = trimesh.load(str(tmp_path / "re.obj")), trimesh.load(str(out / "estimate.obj"))
+    assert len(again.vertices) == len(est.vertices) and len(again.faces) == len(est.faces)
+    np.testing.assert_allclose(np.sort(again.vertices, axis=0), np.sort(est.vertices, axis=0), atol=1e-7)  # float32 points.ply
+    assert again.volume == pytest.approx(report["estimate_size"], rel=1e-5)
+
+
+def _tall_box(path, height):
+    trimesh.creation.box((0.08, 0.08, height)).export(str(path))
+    return path
+
+
+def test_planar_extrusion_is_what_the_arm_sensed_not_the_true_height(tmp_path, capsys, small_arm):
+    """Planar runs on an 80 mm and a 200 mm tall box: the exported estimate spans the arm's plane +-
+    half a link height in both (the true height never leaks into it); --height H spans H."""
+    from explore3d.arm import load_arm
+
+    h = load_arm(str(small_arm)).link_height
+    common = ["--arm", str(small_arm), "--mode", "planar", "--directions", "3", "--attempts", "1", "--no-pictures", "-q"]
+    for height in (0.08, 0.2):
+        obj = _tall_box(tmp_path / f"box{height}.stl", height)
+        out = tmp_path / f"o{height}"
+        code, _, err = run(capsys, "run", str(obj), "--out", str(out), *common)
+        assert code == 0, err
+        m = trimesh.load(str(out / "estimate.obj"))
+        np.testing.assert_allclose(m.bounds[:, 2], [-h / 2, h / 2], atol=1e-7)
+    out = tmp_path / "given"
+    code, _, err = run(capsys, "run", str(obj), "--out", str(out), *common, "--height", "0.05")
+    assert code == 0, err
+    report = json.loads((out / "report.json").read_text())
+    m = trimesh.load(str(out / "estimate.obj"))
+    np.testing.assert_allclose(m.bounds[:, 2], [-0.025, 0.025], atol=1e-7)
+    assert report["config"]["height_m"] == 0.05 and m.volume == pytest.approx(0.05 * report["estimate_size"], rel=1e-5)
+    code, _, err = run(capsys, "run", str(obj), "--out", str(out), *common, "--height", "0")
+    assert code == 2
+    assert_one_line_error(err, "--height")
+
+
+def test_table1_json_has_no_pybullet_banner():
+    """The real ``explore3d table1 --json`` (about 8 s): stdout is exactly the JSON, and PyBullet's
+    C-level banners reach neither stream."""
+    from explore3d._quiet import PYBULLET_BANNERS
+
+    r = _python("-m", "explore3d", "table1", "--json")
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(r.stdout)
+    assert len(rows) >= 5 and all("percent" in row for row in rows)
+    for banner in PYBULLET_BANNERS:
+        assert banner not in r.stdout and banner not in r.stderr, banner
+    assert r.stderr == ""
+
+
+def test_run_prints_one_line_and_no_banner(tmp_path, small_arm):
+    """The real entry point of ``run`` (progress bar off): one result line on stdout, nothing on stderr."""
+    from explore3d._quiet import PYBULLET_BANNERS
+
+    r = _python("-m", "explore3d", "run", "cube", "--out", str(tmp_path / "o"), "--arm", str(small_arm),
+                *_FAST["planar"], "--no-pictures", "-q")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr == "" and r.stdout == ""  # -q: nothing at all
+    r = _python("-m", "explore3d", "run", "cube", "--out", str(tmp_path / "o"), "--arm", str(small_arm),
+                *_FAST["planar"], "--no-pictures")
+    assert r.returncode == 0, r.stderr
+    assert len(r.stdout.splitlines()) == 1 and r.stdout.startswith("cube: ")
+    for banner in PYBULLET_BANNERS:
+        assert banner not in r.stdout and banner not in r.stderr, banner

@@ -243,16 +243,9 @@ def test_literal_formula_gives_outer_hull_3d():
 # ---------------------------------------------------------------- backends
 
 
-def _open3d_or_skip():
-    try:
-        hull_mod._import_open3d()
-    except ImportError as exc:
-        pytest.skip(f"open3d cannot be imported here, so there is no reference to compare with: {exc}")
-
-
+@pytest.mark.needs_open3d
 @pytest.mark.parametrize("method", ["spherical", "exponential"])
 def test_open3d_and_scipy_pick_same_vertices(method):
-    _open3d_or_skip()
     pts, _ = cube_samples(3000, seed=7)
     sp = inverse_hull(pts, a=0.2, method=method, backend="scipy")
     o3 = inverse_hull(pts, a=0.2, method=method, backend="open3d")

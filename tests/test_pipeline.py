@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from explore3d import ArmSpec, ExploreConfig, NoContactError, ReconstructionError, load_object, rough_bound, run
+from explore3d import ArmSpec, ExploreConfig, NoContactError, ReconstructionError, load_arm, load_object, rough_bound, run
+from explore3d._quiet import PYBULLET_BANNERS
 from explore3d.objects import cross_section
 from explore3d.pipeline import planar_truth, within_bound
 
@@ -181,8 +182,15 @@ def test_explore_cube_script_end_to_end(tmp_path):
     err = shape_error(poly, cross_section(load_object("cube"), summary["centre_m"][2]))
     assert summary["percent_error"] == pytest.approx(err.percent, rel=1e-12)
     assert np.isfinite(err.percent) and err.percent > 0
+    # the extrusion covers what the arm sensed (its plane +- half a link height), not the cube's 80 mm
     est = trimesh.load(str(out / "estimate.obj"))
-    assert est.is_watertight and est.volume == pytest.approx(poly.area * 0.08, rel=1e-5)
+    h = load_arm("default").link_height
+    assert est.is_watertight and est.volume == pytest.approx(poly.area * h, rel=1e-5)
+    np.testing.assert_allclose(est.bounds[:, 2], summary["centre_m"][2] + np.array([-h, h]) / 2, atol=1e-7)
+    # no PyBullet banner on either stream (explore3d.quiet_c_output)
+    for banner in PYBULLET_BANNERS:
+        assert banner not in r.stdout and banner not in r.stderr, banner
+    assert r.stderr == ""
 
 
 # --- the outlier filter of the reconstruction --------------------------------------------------------

@@ -69,7 +69,7 @@ def test_box_samples_cover_the_surface_within_the_stated_radius():
         assert cover <= pitch / math.sqrt(2) + 1e-12
 
 
-@pytest.mark.parametrize("backend", ["open3d", "trimesh"])
+@pytest.mark.parametrize("backend", [pytest.param("open3d", marks=pytest.mark.needs_open3d), "trimesh"])
 def test_signed_distance_positive_outside_and_agrees_across_backends(backend):
     mesh = load_object("cube")
     sdf = SignedDistance(mesh, backend=backend)

@@ -1,0 +1,39 @@
+"""The one rule for the optional open3d in the tests.
+
+A test that needs open3d itself (its backend, or open3d as an independent reference) carries
+``@pytest.mark.needs_open3d`` and is skipped, with the import error as the reason, when open3d
+cannot be imported (it is an optional dependency: ``pip install -e ".[open3d]"``; its Linux wheels
+also need the system library libusb-1.0).  Code paths with a scipy/trimesh fallback are tested
+without the marker, so they run (on the fallback) everywhere.
+
+Check the rule with ``EXPLORE3D_TEST_HIDE_OPEN3D=1 python -m pytest ...``: open3d is then made
+unimportable for the whole session, as on a machine without it.
+"""
+import os
+import sys
+
+import pytest
+
+if os.environ.get("EXPLORE3D_TEST_HIDE_OPEN3D"):
+    sys.modules["open3d"] = None  # every `import open3d` now raises ImportError
+
+
+def open3d_import_error() -> str | None:
+    """None if open3d imports, else the first line of the reason it does not."""
+    try:
+        import open3d  # noqa: F401
+    except (ImportError, OSError) as exc:
+        return (str(exc).splitlines() or [type(exc).__name__])[0]
+    return None
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "needs_open3d: the test uses open3d; skipped (with the reason) without it")
+
+
+def pytest_runtest_setup(item):
+    if item.get_closest_marker("needs_open3d") is not None:
+        err = open3d_import_error()
+        if err is not None:
+            pytest.skip(f"open3d cannot be imported ({err}); pip install -e '.[open3d]' (and apt-get install "
+                        "libusb-1.0-0) to run this test")
