@@ -52,7 +52,7 @@ __all__ = ["calibrate_band", "cached_band", "contact_tolerance_m", "box_sphere_d
 log = logging.getLogger(__name__)
 
 #: Bumped whenever the calibration procedure changes (old cache entries are then ignored).
-BAND_PROTOCOL_VERSION = 1
+BAND_PROTOCOL_VERSION = 2
 
 #: Wrap poses of the impact phase: 3D, plane normals through the ball's centre (one approach each).
 IMPACT_NORMALS_3D = 6

@@ -120,7 +120,9 @@ class Exploration:
         band: the calibrated contact band (:func:`explore3d.band.cached_band`).
         steps: physics steps taken (all wraps).
         sim_time_s: simulated time, s.
-        wall_s: wall-clock time of the exploration, s.
+        wall_s: wall-clock time of the exploration, s (the wraps, not the band).
+        band_s: wall-clock time spent getting the contact band, s (calibrating it the first time
+            for a setting, else reading the cache).
         logs: per wrap, its :class:`~explore3d.robot.RobotLog` when ``config.record``, else None.
     """
 
@@ -136,6 +138,7 @@ class Exploration:
     steps: int
     sim_time_s: float
     wall_s: float
+    band_s: float = 0.0
     logs: tuple | None = None
 
     @property
@@ -238,6 +241,8 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
     radius = r0 if radius is None else float(radius)
     poses = wrap_poses(spec, config, centre, radius)
     band = cached_band(spec, config.control, config.sim, config.sensors, config.mode == "planar")
+    band_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
     vertices = np.asarray(mesh.vertices, dtype=float)
     faces = np.asarray(mesh.faces, dtype=np.int64)
     tasks = [(i, p.T_world_base, band, config) for i, p in enumerate(poses)]
@@ -268,6 +273,6 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
     return Exploration(
         spec=spec, config=config, poses=tuple(poses), attempts=attempts, points=points,
         point_wrap=pw, point_attempt=pa, point_link=pl,
-        band=band, steps=steps, sim_time_s=steps * config.sim.timestep, wall_s=time.perf_counter() - t0,
+        band=band, steps=steps, sim_time_s=steps * config.sim.timestep, wall_s=time.perf_counter() - t0, band_s=band_s,
         logs=tuple(r[2] for r in results) if config.record else None,
     )

@@ -414,7 +414,8 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
 
     Returns:
         the :class:`Result` and the report (the dict written to ``out/report.json``).  Its
-        ``timings`` (seconds): ``calibration_s``, ``explore_s`` (the exploration), ``run_s``
+        ``timings`` (seconds): ``calibration_s``, ``band_s`` (the contact band: measured the first
+        time for a setting, else read from the cache), ``explore_s`` (the wraps), ``run_s``
         (exploration, reconstruction and scoring), ``quality_s`` (only with ``output.quality``),
         ``write_s`` (files and pictures), ``total_s``.
 
@@ -486,11 +487,13 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
         raise
     timings["run_s"] = time.perf_counter() - t0
     timings["explore_s"] = float(res.exploration.wall_s)
+    timings["band_s"] = float(res.exploration.band_s)
     summary = res.summary()
     for k in ("centre_m", "radius_m"):  # already in config
         summary.pop(k)
     report.update(summary)
     report["errors"] = res.error.to_dict()
+    report["contact_band"] = res.exploration.band.to_dict()  # per joint, rad, and how it was measured
     if config.mode == "planar":
         report["section_z_m"] = float(res.centre[2])  # the arm's plane passes through the rough centre
         report["estimate_z_band_m"] = list(extrusion_band(res.exploration, output.height))

@@ -17,6 +17,14 @@ import pytest
 if os.environ.get("EXPLORE3D_TEST_HIDE_OPEN3D"):
     sys.modules["open3d"] = None  # every `import open3d` now raises ImportError
 
+# The contact bands are measured once per setting and cached on disk (explore3d.band.cached_band).
+# The tests measure their own in a fresh folder, so no cache from earlier code or runs leaks in
+# (worker processes and subprocesses inherit the variable).
+if not os.environ.get("EXPLORE3D_TEST_KEEP_CACHE"):
+    import tempfile
+
+    os.environ["EXPLORE3D_CACHE_DIR"] = tempfile.mkdtemp(prefix="explore3d-test-cache-")
+
 
 def open3d_import_error() -> str | None:
     """None if open3d imports, else the first line of the reason it does not."""

@@ -347,6 +347,10 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     assert cq["n_detections"] == report["n_contacts"] and cq["n_attempts"] == 3
     assert 0.0 <= cq["false_fraction"] <= 1.0 and cq["penetration_max_m"] < 1e-3
     assert report["config"]["arm"]["n_links"] == 8
+    # the sensing and the measured per-joint contact band are recorded
+    assert report["config"]["explore"]["sensors"]["encoder_counts_per_turn"] == 4096
+    band = report["contact_band"]
+    assert len(band["swept_rad"]) == len(band["other_rad"]) == 8 and band["provenance"]["free_sweep_steps"]
     assert set(report["versions"]) >= {"explore3d", "numpy", "scipy", "trimesh", "pybullet", "shapely"}
     for k in ("object", "mode", "arm", "n_wraps", "n_points", "a", "method", "percent_error", "iou", "chamfer_m",
               "hausdorff_m", "true_size", "estimate_size", "wall_s", "sim_s", "steps", "config", "versions"):
@@ -553,7 +557,7 @@ def test_quality_figures_are_opt_in(tmp_path, capsys, small_arm):
         report = json.loads((out / "report.json").read_text())
         assert "contact_quality" not in report and "quality_s" not in report["timings"]
         assert report["config"]["quality"] is False and report["config"]["explore"]["record"] is False
-        assert set(report["timings"]) == {"explore_s", "run_s", "write_s", "total_s"}
+        assert set(report["timings"]) == {"band_s", "explore_s", "run_s", "write_s", "total_s"}
     code, _, err = run(capsys, *common, "--out", str(tmp_path / "x"), "--quality", "--no-quality")
     assert code == 2
     assert_one_line_error(err, "--no-quality")
