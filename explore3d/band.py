@@ -52,7 +52,7 @@ __all__ = ["calibrate_band", "cached_band", "contact_tolerance_m", "box_sphere_d
 log = logging.getLogger(__name__)
 
 #: Bumped whenever the calibration procedure changes (old cache entries are then ignored).
-BAND_PROTOCOL_VERSION = 2
+BAND_PROTOCOL_VERSION = 3
 
 #: Wrap poses of the impact phase: 3D, plane normals through the ball's centre (one approach each).
 IMPACT_NORMALS_3D = 6
@@ -67,6 +67,64 @@ def gravity_bounding_bases() -> list[np.ndarray]:
     up[:3, :3] = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
     down[:3, :3] = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
     return [np.eye(4), up, down]
+
+
+#: The known calibration block: edge lengths, metres (distinct from every built-in object: the
+#: cube is 80 mm, the box 100 x 60 x 40 mm), turned by :data:`CALIBRATION_BLOCK_ROTVEC` so that
+#: no edge lies along a wrap plane's axes.  With the 60 mm ball it spans the contact types a run
+#: meets: the ball's point contacts on a curved surface, the block's faces, edges and corners.
+CALIBRATION_BLOCK_EXTENTS_M = (0.07, 0.045, 0.03)
+CALIBRATION_BLOCK_ROTVEC = (0.3, -0.5, 0.2)
+
+#: Sampling pitch of a link box's surface when measuring its distance to the block, metres; the
+#: sampled distance overestimates the true one by at most pitch / sqrt(2).
+LINK_SAMPLE_PITCH_M = 2.0e-3
+
+
+def calibration_block_pose() -> np.ndarray:
+    """(4, 4) ``T_world_block`` of the calibration block (centred at the origin, turned)."""
+    from scipy.spatial.transform import Rotation
+
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(CALIBRATION_BLOCK_ROTVEC).as_matrix()
+    return T
+
+
+def calibration_block():
+    """The known calibration block as a closed trimesh in its world pose."""
+    import trimesh
+
+    return trimesh.creation.box(extents=CALIBRATION_BLOCK_EXTENTS_M, transform=calibration_block_pose())
+
+
+def _link_samples(spec: ArmSpec, pitch: float) -> np.ndarray:
+    """(k, 3) points on a link box's surface (corners, edges and faces on a grid of ``pitch``),
+    link frame, metres."""
+    axes = [np.linspace(lo, hi, max(2, int(np.ceil((hi - lo) / pitch)) + 1)) for lo, hi in
+            ((0.0, spec.link_length), (-spec.link_width / 2, spec.link_width / 2),
+             (-spec.link_height / 2, spec.link_height / 2))]
+    X, Y, Z = np.meshgrid(*axes, indexing="ij")
+    P = np.stack([X, Y, Z], axis=-1).reshape(-1, 3)
+    on_surface = np.zeros(len(P), dtype=bool)
+    for i, a in enumerate(axes):
+        on_surface |= np.isclose(P[:, i], a[0]) | np.isclose(P[:, i], a[-1])
+    return P[on_surface]
+
+
+def box_box_distance(spec: ArmSpec, T_world_link, T_world_box, extents, pitch: float = LINK_SAMPLE_PITCH_M) -> np.ndarray:
+    """(m,) distance, metres, from each link box (frames ``T_world_link`` (m, 4, 4)) to a box of
+    ``extents`` (3,) metres centred at ``T_world_box`` (4, 4): the smallest exact point-to-box
+    distance over the link surface sampled at ``pitch``, minus ``pitch / sqrt(2)`` (so never more
+    than the true distance); negative when a sample is inside."""
+    T = np.asarray(T_world_link, dtype=np.float64).reshape(-1, 4, 4)
+    local = _link_samples(spec, pitch)
+    P = np.einsum("mij,kj->mki", T[:, :3, :3], local) + T[:, None, :3, 3]  # (m, k, 3) world
+    B = np.asarray(T_world_box, dtype=np.float64)
+    Pb = (P - B[:3, 3]) @ B[:3, :3]  # box frame
+    half = np.asarray(extents, dtype=np.float64) / 2
+    outside = np.linalg.norm(np.maximum(np.abs(Pb) - half, 0.0), axis=-1)
+    inside = np.minimum((np.abs(Pb) - half).max(axis=-1), 0.0)
+    return (outside + inside).min(axis=1) - pitch / np.sqrt(2.0)
 
 
 def box_sphere_distance(spec: ArmSpec, T_world_link, centre, radius: float) -> np.ndarray:
@@ -150,10 +208,16 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
     bases = [np.eye(4)] if planar else gravity_bounding_bases()
     with ArmSimulation(spec, config=sim) as world:
         robot = world.robot(sensors)
-        robot.reseed((1,))  # streams: (0, wrap) exploration, (1,) free motion, (2, round, wrap) impacts
+        robot.reseed((1,))  # streams: (0, wrap) exploration, (1,) free motion, (2, pass, object, wrap) impacts
         free = _free_motion(robot, spec, control, bases)
-    ball = calibration_sphere()
-    centre, radius = np.zeros(3), CALIBRATION_SPHERE_RADIUS_M
+    T_block = calibration_block_pose()
+    objects = [  # (name, mesh, rough radius for the wrap poses, distance of link boxes to it)
+        (f"sphere r={CALIBRATION_SPHERE_RADIUS_M * 1000:.0f} mm", calibration_sphere(), CALIBRATION_SPHERE_RADIUS_M,
+         lambda Tl: box_sphere_distance(spec, Tl, np.zeros(3), CALIBRATION_SPHERE_RADIUS_M)),
+        ("block {:.0f} x {:.0f} x {:.0f} mm".format(*(1000 * np.array(CALIBRATION_BLOCK_EXTENTS_M))), calibration_block(),
+         float(np.linalg.norm(CALIBRATION_BLOCK_EXTENTS_M)) / 2,
+         lambda Tl: box_box_distance(spec, Tl, T_block, CALIBRATION_BLOCK_EXTENTS_M)),
+    ]
     tol = contact_tolerance_m(spec, control, sim, sensors)
     impact = _Maxima(n)
 
@@ -161,23 +225,18 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
         return ContactBand(swept=control.band_factor * np.maximum(free.swept, impact.swept),
                            other=control.band_factor * np.maximum(free.other, impact.other))
 
-    def near_ball(k, reading, T) -> bool:
-        Tl = link_transforms(spec, reading.q, T)[k:]
-        return bool(box_sphere_distance(spec, Tl, centre, radius).min() <= tol)
-
+    # Pass 1 (measure): away from the known object no step is a contact (the object says so), and
+    # its signals are recorded; near it, the detector with the bands measured so far decides.
+    # Pass 2 (verify): the final bands alone decide; a detection away from the object is false.
     passes = []
-    with ArmSimulation(spec, ball.vertices, ball.faces, sim) as world:
-        robot = world.robot(sensors)
-        poses = _impact_poses(spec, centre, radius, planar)
-        # Pass 1 (measure): away from the ball no step is a contact (the known object says so), and
-        # its signals are recorded; near it, the detector with the bands measured so far decides.
-        # Pass 2 (verify): the final bands alone decide; a detection away from the ball is false.
-        for name in ("measure", "verify"):
-            band = running_band()
-            counts = {"pass": name, "contacts": 0, "false_detections": 0}
+    n_wraps = 0
+    for name in ("measure", "verify"):
+        band = running_band()
+        for oi, (label, mesh, radius, distance) in enumerate(objects):
+            counts = {"pass": name, "object": label, "contacts": 0, "false_detections": 0}
 
             def observe(k, reading, lag, sig):
-                if near_ball(k, reading, observe.T):
+                if distance(link_transforms(spec, reading.q, observe.T)[k:]).min() <= tol:
                     return SweepDetector.exceeds(running_band() if name == "measure" else band, k, lag, sig)
                 if name == "measure":
                     impact.add(k, lag, sig)
@@ -185,25 +244,29 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
                 counts["false_detections"] += SweepDetector.exceeds(band, k, lag, sig)
                 return None
 
-            for i, pose in enumerate(poses):
-                robot.reseed((2, len(passes), i))
-                observe.T = pose.T_world_base
-                counts["contacts"] += int(run_attempt(robot, pose.T_world_base, band, control,
-                                                      observer=observe).contact.sum())
+            with ArmSimulation(spec, mesh.vertices, mesh.faces, sim) as world:
+                robot = world.robot(sensors)
+                poses = _impact_poses(spec, np.zeros(3), radius, planar)
+                n_wraps += len(poses)
+                for i, pose in enumerate(poses):
+                    robot.reseed((2, len(passes), oi, i))
+                    observe.T = pose.T_world_base
+                    counts["contacts"] += int(run_attempt(robot, pose.T_world_base, band, control,
+                                                          observer=observe).contact.sum())
             passes.append(counts)
     swept = np.maximum(free.swept, impact.swept)
     other = np.maximum(free.other, impact.other)
     prov = {
         "protocol_version": BAND_PROTOCOL_VERSION,
         "rule": "band_factor x the largest contact-free signal (free motion of every joint in the base orientations "
-                "bounding gravity; contact-free sweep steps of attempts on the known 60 mm ball)",
+                "bounding gravity; contact-free sweep steps of attempts on the known calibration ball and block)",
         "band_factor": control.band_factor,
         "free_motion_bases": len(bases),
         "free_swept_max_rad": free.swept.tolist(), "free_other_max_rad": free.other.tolist(),
         "free_sweep_steps": free.steps.tolist(), "impact_contact_free_steps": impact.steps.tolist(),
         "impact_swept_max_rad": impact.swept.tolist(), "impact_other_max_rad": impact.other.tolist(),
-        "impact_wraps": len(poses), "impact_passes": passes, "contact_tolerance_m": tol,
-        "calibration_object": f"sphere r={radius * 1000:.0f} mm at the origin",
+        "impact_wraps": n_wraps, "impact_passes": passes, "contact_tolerance_m": tol,
+        "calibration_objects": [o[0] for o in objects],
         "wall_s": time.perf_counter() - t0,
     }
     return ContactBand(swept=control.band_factor * swept, other=control.band_factor * other, provenance=prov)

@@ -65,7 +65,11 @@ class ControlConfig:
             computed from the arm's own model, the sensed joint angles, the known base pose and
             gravity; the swept joint's torque limit then leaves gravity out.
         rereference_held: after each detection the held joints' references are reset to their
-            measured angles (no held joint stays saturated against the object).
+            measured angles (no held joint stays saturated against the object).  On by default:
+            measured on the calibration ball, held links pressing against the object at full
+            torque chattered (contact forces jumping between 0 and 15-24 N from step to step) and
+            shook the chain; with re-referencing the contact-free signals, and so the measured
+            bands, shrank 3-30x (BENCHMARKS.md).
         max_curl: a joint is not swept once the joints before it have curled this much in
             total, rad (2 pi: the chain has gone once around the object; beyond, it would lie
             over itself).
@@ -84,7 +88,7 @@ class ControlConfig:
     sweep_torque_margin: float = 0.05
     watch_held: bool = False
     gravity_compensation: bool = True
-    rereference_held: bool = False
+    rereference_held: bool = True
     max_curl: float = 2 * math.pi
     settle_steps: int = 3
     max_sweep_steps: int = 2000
