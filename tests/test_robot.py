@@ -204,7 +204,8 @@ def test_band_is_measured_for_every_joint_and_cached(tmp_path, monkeypatch):
     assert free_steps[0] == free_steps.max()
     meas = np.maximum(prov["free_swept_max_rad"], prov["impact_swept_max_rad"])
     assert np.allclose(b1.swept, ControlConfig().band_factor * meas)
-    assert prov["impact_rounds"] and prov["impact_wraps"] > 0
+    assert prov["impact_wraps"] > 0 and [p["pass"] for p in prov["impact_passes"]] == ["measure"] * 2 + ["verify"] * 2
+    assert sum(p["contacts"] for p in prov["impact_passes"]) > 0  # the known objects were touched
     cached_band.cache_clear()
     calls = []
     monkeypatch.setattr(band_mod, "calibrate_band", lambda *a, **k: calls.append(a))
