@@ -47,3 +47,23 @@ def check_positive(x, name: str) -> float:
     if not np.isfinite(val) or val <= 0:
         raise ValueError(f"{name} must be a positive finite number; got {val}")
     return val
+
+
+def check_field(owner, name: str, lo: float | None = None, unit: str = "", strict: bool = False,
+                hi: float | None = None, integer: bool = False) -> None:
+    """Check the dataclass field ``owner.name``: a finite number (an int if ``integer``; never a
+    bool) in ``[lo, hi]`` (``(lo, hi]`` if ``strict``).  Raises ValueError naming the class, the
+    field, the expected range with its unit, and the actual value."""
+    v = getattr(owner, name)
+    kinds = (int,) if integer else (int, float, np.integer, np.floating)
+    ok = isinstance(v, kinds) and not isinstance(v, bool) and np.isfinite(v)
+    if ok and lo is not None:
+        ok = v > lo if strict else v >= lo
+    if ok and hi is not None:
+        ok = v <= hi
+    if not ok:
+        what = "an integer" if integer else "a finite number"
+        rng = "" if lo is None else f" {'>' if strict else '>='} {lo:g}"
+        rng += "" if hi is None else f" and <= {hi:g}"
+        unit = f" {unit}" if unit else ""
+        raise ValueError(f"{type(owner).__name__}.{name} must be {what}{rng}{unit}; got {v!r}")

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._validate import check_field
 from .arm import ArmSpec
 from .detect import ContactBand, SweepDetector
 from .kinematics import gravity_torques
@@ -94,25 +95,20 @@ class ControlConfig:
     max_sweep_steps: int = 2000
 
     def __post_init__(self):
-        def number(name, lo, unit, strict):
-            v = getattr(self, name)
-            ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and (v > lo if strict else v >= lo)
-            if not ok:
-                raise ValueError(f"ControlConfig.{name} must be a finite number {'>' if strict else '>='} {lo:g}{unit}; got {v!r}")
-
-        number("speed", 0, " rad/s", True)
-        number("band_factor", 1, "", False)
-        number("sweep_torque_factor", 0, "", True)
-        number("max_curl", 0, " rad", True)
-        for name, unit in (("ramp_time", " s"), ("hold_bias", " rad"), ("limit_margin", " rad"),
-                           ("sweep_torque_margin", " N m")):
-            number(name, 0, unit, False)
+        check_field(self, "speed", 0, "rad/s", strict=True)
         if self.tip_speed is not None:
-            number("tip_speed", 0, " m/s (or None)", True)
-        for name, lo in (("settle_steps", 0), ("max_sweep_steps", 1)):
-            v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool) or v < lo:
-                raise ValueError(f"ControlConfig.{name} must be an integer >= {lo}; got {v!r}")
+            check_field(self, "tip_speed", 0, "m/s (or None)", strict=True)
+        check_field(self, "band_factor", 1)
+        check_field(self, "sweep_torque_factor", 0, strict=True)
+        check_field(self, "max_curl", 0, "rad", strict=True)
+        for name, unit in (("ramp_time", "s"), ("hold_bias", "rad"), ("limit_margin", "rad"),
+                           ("sweep_torque_margin", "N m")):
+            check_field(self, name, 0, unit)
+        check_field(self, "settle_steps", 0, integer=True)
+        check_field(self, "max_sweep_steps", 1, integer=True)
+        for name in ("watch_held", "gravity_compensation", "rereference_held"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"ControlConfig.{name} must be True or False; got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ._validate import check_field
 from .arm import ArmSpec, load_arm
 from .directions import WrapPose, planar_wrap_poses, spatial_wrap_poses
 from .band import cached_band
@@ -95,6 +96,18 @@ class ExploreConfig:
                 raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
         if self.jobs is not None and (not isinstance(self.jobs, int) or self.jobs < 1):
             raise ValueError(f"jobs must be an integer >= 1 or None (all cores); got {self.jobs!r}")
+        check_field(self, "base_step", 0, "rad", strict=True)
+        check_field(self, "clearance", 0, "m")
+        check_field(self, "face_offset", None, "m")
+        if isinstance(self.faces, (list, tuple)):
+            object.__setattr__(self, "faces", tuple(self.faces))
+        if not isinstance(self.faces, tuple) or not self.faces or not set(self.faces) <= {"inner", "outer"} or len(set(self.faces)) != len(self.faces):
+            raise ValueError(f"ExploreConfig.faces must be ('inner',), ('outer',) or ('inner', 'outer'); got {self.faces!r}")
+        for name, cls in (("control", ControlConfig), ("sim", SimConfig), ("sensors", SensorConfig)):
+            if not isinstance(getattr(self, name), cls):
+                raise ValueError(f"ExploreConfig.{name} must be a {cls.__name__}; got {type(getattr(self, name)).__name__}")
+        if not isinstance(self.mirrored, bool) or not isinstance(self.record, bool):
+            raise ValueError(f"ExploreConfig.mirrored and record must be True or False; got {self.mirrored!r}, {self.record!r}")
 
     def to_dict(self) -> dict:
         d = asdict(self)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._validate import check_field
 from .arm import ArmSpec
 from .robot import JointCommand, JointReading, Robot
 from .sensing import SensorConfig, Sensors
@@ -58,11 +59,16 @@ class SimConfig:
 
     def __post_init__(self):
         if self.solver not in ("dantzig", "si"):
-            raise ValueError(f"solver must be 'dantzig' or 'si'; got {self.solver!r}")
-        if not (0 < self.timestep <= 0.05):
-            raise ValueError(f"timestep must be in (0, 0.05] s; got {self.timestep}")
-        if self.collision_margin is not None and not (0.0 <= self.collision_margin <= 0.01):
-            raise ValueError(f"collision_margin must be in [0, 0.01] m or None; got {self.collision_margin}")
+            raise ValueError(f"SimConfig.solver must be 'dantzig' or 'si'; got {self.solver!r}")
+        check_field(self, "timestep", 0, "s", strict=True, hi=0.05)
+        check_field(self, "position_gain", 0, strict=True)
+        check_field(self, "velocity_gain", 0)
+        check_field(self, "friction", 0)
+        if self.collision_margin is not None:
+            check_field(self, "collision_margin", 0, "m (or None)", hi=0.01)
+        g = np.asarray(self.gravity, dtype=float) if np.ndim(self.gravity) == 1 else None
+        if g is None or g.shape != (3,) or not np.isfinite(g).all():
+            raise ValueError(f"SimConfig.gravity must be 3 finite numbers, m/s^2, world frame; got {self.gravity!r}")
 
 
 def _pose_from_T(T) -> tuple[list, list]:
