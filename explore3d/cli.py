@@ -172,6 +172,9 @@ RUN_OPTIONS = {
     # so older command lines and configs still work)
     "quality": None,  # bool
     "no_quality": None,  # bool
+    # what the robot feels, and the simulator's contact margin
+    "sensing": _choice("sensing", ("default", "ideal")),
+    "collision_margin": _nonnegative("--collision-margin"),
     # outputs
     "density": _positive("--density"),
     "height": _positive("--height"),
@@ -270,6 +273,11 @@ def build_parser() -> argparse.ArgumentParser:
                          "duck 34 s + 13 min); their time is report.json's timings.quality_s")
     q_.add_argument("--no-quality", dest="no_quality", action="store_true", default=None,
                     help="no contact-quality figures (the default; kept for older command lines)")
+    r.add_argument("--sensing", type=RUN_OPTIONS["sensing"],
+                   help="what the servos report: default (4096-count encoders, 1 mN m torque resolution and noise, "
+                        "one step of delay) or ideal (exact, no delay)")
+    r.add_argument("--collision-margin", dest="collision_margin", type=RUN_OPTIONS["collision_margin"],
+                   help="the simulator's contact margin on the object and the links, metres (default 0.0003)")
     r.add_argument("--density", type=RUN_OPTIONS["density"],
                    help=f"density of the estimate body in estimate.urdf, kg/m^3 (default {DEFAULT_DENSITY_KG_M3:g})")
     r.add_argument("--height", type=RUN_OPTIONS["height"],
@@ -374,9 +382,16 @@ def explore_config(opts: dict):
     """The :class:`ExploreConfig` for resolved ``opts`` (unset fields keep ExploreConfig's defaults)."""
     from .explore import ExploreConfig
 
+    from .sensing import SensorConfig
+    from .sim import SimConfig
+
     kw = {k: opts[k] for k in _EXPLORE_KEYS if k in opts}
     kw.setdefault("jobs", None)  # the command line spreads wraps over all cores unless told
     try:
+        if opts.get("sensing") == "ideal":
+            kw["sensors"] = SensorConfig.ideal()
+        if opts.get("collision_margin") is not None:
+            kw["sim"] = SimConfig(collision_margin=opts["collision_margin"])
         return ExploreConfig(**kw)
     except (TypeError, ValueError) as exc:
         raise UsageError(str(exc)) from None

@@ -672,3 +672,20 @@ def test_run_prints_one_line_and_no_banner(tmp_path, small_arm):
     assert len(r.stdout.splitlines()) == 1 and r.stdout.startswith("cube: ")
     for banner in PYBULLET_BANNERS:
         assert banner not in r.stdout and banner not in r.stderr, banner
+
+
+def test_sensing_and_contact_margin_options_reach_the_report(tmp_path, capsys, small_arm):
+    out = tmp_path / "o"
+    code, _, err = run(capsys, "run", "cube", "--arm", str(small_arm), "--mode", "planar", "--directions", "3",
+                       "--attempts", "1", "--no-pictures", "-q", "--out", str(out), "--sensing", "ideal",
+                       "--collision-margin", "0.0005")
+    assert code == 0, err
+    report = json.loads((out / "report.json").read_text())
+    sensors = report["config"]["explore"]["sensors"]
+    assert sensors["encoder_counts_per_turn"] == 0 and sensors["delay_steps"] == 0 and sensors["torque_noise_nm"] == 0
+    assert report["config"]["explore"]["sim"]["collision_margin"] == 0.0005
+    for bad, word in ((["--sensing", "perfect"], "sensing"), (["--collision-margin", "-1"], "--collision-margin"),
+                      (["--collision-margin", "0.5"], "collision_margin")):
+        code, _, err = run(capsys, "run", "cube", "--out", str(tmp_path / "x"), *bad)
+        assert code == 2
+        assert_one_line_error(err, word)
