@@ -167,9 +167,6 @@ class _Maxima:
         self.swept[k] = max(self.swept[k], lag)
         np.maximum(self.other, np.abs(sig), out=self.other)
 
-    def band(self, factor: float, provenance: dict | None = None) -> ContactBand:
-        return ContactBand(swept=factor * self.swept, other=factor * self.other, provenance=provenance or {})
-
 
 def _free_motion(robot, spec: ArmSpec, control: ControlConfig, bases) -> _Maxima:
     mx = _Maxima(spec.n_links)
