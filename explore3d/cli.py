@@ -269,8 +269,8 @@ def build_parser() -> argparse.ArgumentParser:
     q_ = r.add_mutually_exclusive_group()
     q_.add_argument("--quality", dest="quality", action="store_true", default=None,
                     help="also compute the contact-quality figures (evaluation only, after the run, against the "
-                         "true mesh; records the joint trajectories; slow: cube 45 s exploring + 33 s quality, "
-                         "duck 34 s + 13 min); their time is report.json's timings.quality_s")
+                         "true mesh; records the joint trajectories; slow: about 30 s more on the cube, "
+                         "minutes on large meshes); their time is report.json's timings.quality_s")
     q_.add_argument("--no-quality", dest="no_quality", action="store_true", default=None,
                     help="no contact-quality figures (the default; kept for older command lines)")
     r.add_argument("--sensing", type=RUN_OPTIONS["sensing"],
