@@ -319,6 +319,22 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--json", action="store_true", help="print JSON only")
     e.set_defaults(func=cmd_evaluate)
 
+    k = sub.add_parser("compare", help="the paper's link points against an ideal skin on the same sweeps",
+                       description="Explore OBJECT once; print the error, IoU, Chamfer distance and surface coverage "
+                                   "(within 3 and 6 mm of a point) of the pipeline's link points and of an ideal skin "
+                                   "(every contact point PyBullet reports at the same readings; evaluation only).")
+    k.add_argument("object", help="built-in name, mesh path or pybullet_data:NAME")
+    k.add_argument("--arm", default="default", help="built-in arm or a URDF written by 'explore3d arm'")
+    k.add_argument("--mode", type=RUN_OPTIONS["mode"], help="3d (default) or planar")
+    k.add_argument("--directions", type=RUN_OPTIONS["directions"], help="approach directions / plane normals")
+    k.add_argument("--attempts", type=RUN_OPTIONS["attempts"], help="attempts per wrap")
+    k.add_argument("--angles", type=RUN_OPTIONS["angles"], help="3d: approach angles per plane")
+    k.add_argument("--a", type=RUN_OPTIONS["a"], default=DEFAULT_A, help=f"inverse-hull coarseness (default {DEFAULT_A})")
+    k.add_argument("--size", type=RUN_OPTIONS["size"], help="rescale the object so its longest side is SIZE metres")
+    k.add_argument("--jobs", type=RUN_OPTIONS["jobs"], help="worker processes for the exploration (default: all cores)")
+    k.add_argument("--json", action="store_true", help="print JSON only")
+    k.set_defaults(func=cmd_compare)
+
     t = sub.add_parser("table1", help="the paper's Table 1 next to ours",
                        description="Reproduce Table 1 of the paper (explore3d.table1.table1_rows).")
     t.add_argument("--json", action="store_true", help="print JSON")
@@ -597,6 +613,38 @@ def cmd_evaluate(args) -> int:
     print(f"true size      {err.true_size:.6g} {unit}")
     print(f"estimate size  {err.estimate_size:.6g} {unit}")
     print(json.dumps(d))
+    return 0
+
+
+def cmd_compare(args) -> int:
+    from ._quiet import quiet_c_output
+
+    _check_object_name(args.object)
+    opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs")
+            if getattr(args, k) is not None}
+    config = explore_config(opts)
+    with quiet_c_output():
+        from .arm import load_arm
+        from .compare import compare, format_compare
+        from .objects import load_object
+        from .pipeline import NoContactError, ReconstructionError
+
+        try:
+            spec = load_arm(args.arm)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        mesh = load_object(args.object, size=args.size)
+        try:
+            report = compare(mesh, spec, config, a=args.a)
+        except (NoContactError, ReconstructionError) as exc:
+            raise RunError(str(exc)) from None
+    report["object"] = args.object
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    print(f"{args.object}: {report['n_wraps']} wraps ({config.mode}), {report['n_contacts']} detections, "
+          f"{report['skin_contacts']} skin contacts ({report['skin_loaded']} carrying force)")
+    print(format_compare(report))
     return 0
 
 

@@ -29,7 +29,7 @@ WORLD_QUERIES = ("getContactPoints", "getClosestPoints", "rayTest", "rayTestBatc
                  "getBasePositionAndOrientation", "getBaseVelocity", "getAABB", "getOverlappingObjects")
 
 #: Modules of the evaluation layer (truth and oracle), the only ones allowed to name them.
-EVALUATION_MODULES = {"quality.py", "replay.py", "sdf.py", "calibration.py", "pictures.py"}
+EVALUATION_MODULES = {"quality.py", "replay.py", "sdf.py", "skin.py", "compare.py", "calibration.py", "pictures.py"}
 
 
 def _vertical_base():
