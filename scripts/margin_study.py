@@ -143,8 +143,6 @@ def main(argv=None):
                     help="ControlConfig(rereference_held=True) instead of the default controller")
     args = ap.parse_args(argv)
 
-    import pybullet  # noqa: F401
-
     import explore3d
     from explore3d.encircle import ControlConfig
     from explore3d.explore import ExploreConfig
