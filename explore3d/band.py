@@ -286,21 +286,35 @@ def band_cache_key(spec: ArmSpec, control: ControlConfig, sim: SimConfig, sensor
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
 
+def factory_band_path(key: str) -> Path:
+    """Where the package ships the band of setting ``key`` (:func:`band_cache_key`), measured by
+    ``python scripts/make_bands.py`` for the built-in arms' default settings (a real arm's factory
+    calibration; the same numbers :func:`calibrate_band` gives)."""
+    return Path(__file__).resolve().parent / "data" / f"band-{key}.json"
+
+
+#: The settings whose bands ship with the package: (arm name, planar).
+FACTORY_SETTINGS = (("default", False), ("default", True), ("paper", True))
+
+
 @functools.lru_cache(maxsize=16)
 def cached_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim: SimConfig = SimConfig(),
                 sensors: SensorConfig = SensorConfig(), planar: bool = False) -> ContactBand:
     """:func:`calibrate_band`, computed once per setting: from memory, else from the disk cache,
-    else measured and stored there (``provenance["cache"]`` says which)."""
+    else from the factory calibration shipped with the package (the default arms' default
+    settings, :func:`factory_band_path`), else measured and stored in the disk cache
+    (``provenance["cache"]`` says which)."""
     from .io import atomic_write_text
 
     key = band_cache_key(spec, control, sim, sensors, planar)
     path = _cache_dir() / "bands" / f"{key}.json"
-    try:
-        band = ContactBand.from_dict(json.loads(path.read_text()))
+    for where in (path, factory_band_path(key)):
+        try:
+            band = ContactBand.from_dict(json.loads(where.read_text()))
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
         if len(band.swept) == spec.n_links:
-            return dataclasses.replace(band, provenance={**band.provenance, "cache": str(path)})
-    except (OSError, ValueError, KeyError, TypeError):
-        pass
+            return dataclasses.replace(band, provenance={**band.provenance, "cache": str(where)})
     band = calibrate_band(spec, control, sim, sensors, planar)
     try:
         atomic_write_text(path, json.dumps(band.to_dict(), indent=1) + "\n")

@@ -258,3 +258,34 @@ def test_no_module_outside_the_evaluation_layer_names_a_world_query():
             if pattern.search(line):
                 offenders.append(f"{rel}:{i}: {line.strip()}")
     assert not offenders, offenders
+
+
+def test_factory_bands_are_those_of_the_current_defaults():
+    """The bands shipped in explore3d/data are exactly the built-in arms' default settings; a
+    change of any default (or of the protocol or version) must regenerate them
+    (``python scripts/make_bands.py``), or the first run would silently recalibrate."""
+    from explore3d.arm import load_arm
+    from explore3d.band import FACTORY_SETTINGS, band_cache_key, factory_band_path
+    from explore3d.sim import SimConfig
+
+    keys = {band_cache_key(load_arm(a), ControlConfig(), SimConfig(), SensorConfig(), p) for a, p in FACTORY_SETTINGS}
+    shipped = {p.stem.removeprefix("band-") for p in factory_band_path("x").parent.glob("band-*.json")}
+    assert shipped == keys, "regenerate the factory bands: python scripts/make_bands.py"
+
+
+def test_factory_band_is_what_the_calibration_measures(monkeypatch, tmp_path):
+    """The paper arm's shipped planar band equals a fresh calibration on this code (bit for bit:
+    the calibration is deterministic), and cached_band reads it without calibrating."""
+    from explore3d import band as band_mod
+    from explore3d.arm import load_arm
+    from explore3d.sim import SimConfig
+
+    spec = load_arm("paper")
+    fresh = band_mod.calibrate_band(spec, ControlConfig(), SimConfig(), SensorConfig(), planar=True)
+    monkeypatch.setenv("EXPLORE3D_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(band_mod, "calibrate_band", lambda *a, **k: pytest.fail("calibrated instead of reading"))
+    cached_band.cache_clear()
+    shipped = cached_band(spec, ControlConfig(), SimConfig(), SensorConfig(), True)
+    cached_band.cache_clear()
+    assert "data/band-" in shipped.provenance["cache"]
+    assert np.array_equal(shipped.swept, fresh.swept) and np.array_equal(shipped.other, fresh.other)
