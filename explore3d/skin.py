@@ -108,24 +108,24 @@ def ideal_skin(exploration, mesh) -> SkinContacts:
 
     cfg = exploration.config
     rows = {k: [] for k in ("p", "f", "l", "w", "a", "fin")}
-    with ArmSimulation(exploration.spec, np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64),
-                       cfg.sim) as world:
-        for wi, (pose, atts) in enumerate(zip(exploration.poses, exploration.attempts)):
+    V, F = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+    for wi, (pose, atts) in enumerate(zip(exploration.poses, exploration.attempts)):
+        with ArmSimulation(exploration.spec, V, F, cfg.sim) as world:  # a world per wrap, as explore()
             robot = world.robot(cfg.sensors)
             robot.reseed((0, wi))  # as explore() seeds the wrap
             skin = _SkinRobot(world, robot, _wanted_steps(atts, cfg.control.settle_steps))
             again = run_wrap(skin, pose.T_world_base, exploration.band, attempts=cfg.attempts,
                              base_step=cfg.base_step, cfg=cfg.control)
-            if len(again) != len(atts) or not all(np.array_equal(a.q, b.q) for a, b in zip(again, atts)):
-                raise RuntimeError(f"wrap {wi}: the re-run did not reproduce the recorded attempts; the ideal "
-                                   "skin needs the exploration's own mesh, arm and configuration")
-            for ai, fin, link, p, f in skin.rows:
-                rows["p"].append(p)
-                rows["f"].append(f)
-                rows["l"].append(link)
-                rows["w"].append(wi)
-                rows["a"].append(ai)
-                rows["fin"].append(fin)
+        if len(again) != len(atts) or not all(np.array_equal(a.q, b.q) for a, b in zip(again, atts)):
+            raise RuntimeError(f"wrap {wi}: the re-run did not reproduce the recorded attempts; the ideal "
+                               "skin needs the exploration's own mesh, arm and configuration")
+        for ai, fin, link, p, f in skin.rows:
+            rows["p"].append(p)
+            rows["f"].append(f)
+            rows["l"].append(link)
+            rows["w"].append(wi)
+            rows["a"].append(ai)
+            rows["fin"].append(fin)
     return SkinContacts(points=np.array(rows["p"], dtype=float).reshape(-1, 3),
                         normal_force_n=np.array(rows["f"], dtype=float), link=np.array(rows["l"], dtype=int),
                         wrap=np.array(rows["w"], dtype=int), attempt=np.array(rows["a"], dtype=int),
