@@ -172,11 +172,19 @@ def torques_of_contacts(spec: ArmSpec, q, contacts) -> np.ndarray:
     return tau
 
 
-def _fit(cols: list, tau: np.ndarray):
+#: Largest contact force a fit may use, N: cancelling pairs of huge forces at neighbouring links
+#: (the columns of a link's distal corner and the next link's proximal corner nearly coincide) are
+#: not contacts.
+MAX_FORCE_N = 100.0
+
+
+def _fit(cols: list, tau: np.ndarray, fmax: float = MAX_FORCE_N):
     if not cols:
         return np.zeros(0), float(tau @ tau)
     A = np.concatenate(cols, axis=1)
     x, rnorm = nnls(A, tau, maxiter=50 * A.shape[1])
+    if x.size and x.max() > fmax:
+        return x, float("inf")
     return x, float(rnorm * rnorm)
 
 
@@ -319,3 +327,31 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
                                      height_interval=(-H / 2, H / 2), segment_world=seg_w, force_world=Fw,
                                      normal_world=Fw / fn if fn > 0 else Fw, force_n=fn, sigma_along_m=sig_s))
     return Localisation(tuple(contacts), float(np.sqrt(rss / n)), rss0, rss, sigma_nm, pred)
+
+
+def inverse_dynamics(spec: ArmSpec, q, dq, ddq) -> np.ndarray:
+    """(n,) joint torques, N m, that move the planar chain (no gravity, no contact) with angles
+    ``q``, velocities ``dq`` and accelerations ``ddq`` (n,) each (Newton-Euler; link i a uniform box
+    of mass m, centre of mass at mid-link, inertia m (L^2 + W^2) / 12 about z).  The external torques
+    of the contacts at a moving moment are then ``inverse_dynamics - (tau_motor + g(q))``."""
+    q, dq, ddq = (np.asarray(v, float) for v in (q, dq, ddq))
+    n, L, m = spec.n_links, spec.link_length, spec.link_mass
+    I = m * (L * L + spec.link_width ** 2) / 12.0
+    th, w, al = np.cumsum(q), np.cumsum(dq), np.cumsum(ddq)
+    e = np.stack([np.cos(th), np.sin(th)], axis=1)
+    perp = np.stack([-e[:, 1], e[:, 0]], axis=1)
+    a_o = np.zeros((n + 1, 2))
+    for i in range(n):
+        a_o[i + 1] = a_o[i] + L * (al[i] * perp[i] - w[i] ** 2 * e[i])
+    a_c = a_o[:n] + (L / 2) * (al[:, None] * perp - (w ** 2)[:, None] * e)
+    f_next, n_next = np.zeros(2), 0.0
+    tau = np.zeros(n)
+    for i in range(n - 1, -1, -1):
+        f_i = m * a_c[i] + f_next  # force on link i from link i-1 at joint i
+        r_o = -(L / 2) * e[i]  # joint i relative to the centre of mass
+        r_n = (L / 2) * e[i]  # joint i+1 relative to the centre of mass
+        cr = lambda r, f: r[0] * f[1] - r[1] * f[0]
+        n_i = I * al[i] + n_next - cr(r_o, f_i) + cr(r_n, f_next)
+        tau[i] = n_i
+        f_next, n_next = f_i, n_i
+    return tau
