@@ -48,11 +48,19 @@ from scipy.optimize import nnls
 from .arm import ArmSpec
 from .kinematics import link_transforms
 
-__all__ = ["LocalContact", "Localisation", "localise", "external_torques", "link_outline", "KINDS",
+__all__ = ["LocalContact", "Localisation", "localise", "external_torques", "link_outline", "KINDS", "INNER_SIDE", "inverse_dynamics",
            "torques_of_contacts"]
 
 #: Candidate kinds on a link's in-plane outline: four faces, four corners.
 KINDS = ("inner", "outer", "distal", "proximal", "corner_di", "corner_do", "corner_pi", "corner_po")
+
+#: The kinds an object on the curl side can touch (default): the inner face and its two corners,
+#: and the tip link's distal face and corners.  A link's end faces lie against its neighbours' (the
+#: gaps between links open on the outer side as the chain curls), the outer face looks away from
+#: the object; candidates there only fit noise (a force along a straight distal chain has almost
+#: no lever and fits anything with a huge magnitude).
+INNER_SIDE = ("inner", "corner_di", "corner_pi")
+TIP_EXTRA = ("distal", "corner_do")
 
 
 def link_outline(spec: ArmSpec):
@@ -178,10 +186,14 @@ def torques_of_contacts(spec: ArmSpec, q, contacts) -> np.ndarray:
 MAX_FORCE_N = 100.0
 
 
-def _fit(cols: list, tau: np.ndarray, fmax: float = MAX_FORCE_N):
+def _fit_module(cols: list, tau: np.ndarray, fmax: float = MAX_FORCE_N, ridge: float = 0.0):
     if not cols:
         return np.zeros(0), float(tau @ tau)
     A = np.concatenate(cols, axis=1)
+    if ridge > 0:  # a small penalty on the forces: among explanations the data cannot tell apart
+        # (e.g. a straight proximal chain does not see the force along itself) the gentlest wins
+        A = np.vstack([A, np.sqrt(ridge) * np.eye(A.shape[1])])
+        tau = np.concatenate([tau, np.zeros(A.shape[1])])
     x, rnorm = nnls(A, tau, maxiter=50 * A.shape[1])
     if x.size and x.max() > fmax:
         return x, float("inf")
@@ -189,7 +201,8 @@ def _fit(cols: list, tau: np.ndarray, fmax: float = MAX_FORCE_N):
 
 
 def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0e-3, chi2_gain: float = 25.0,
-             max_contacts: int | None = None, kinds=KINDS, swap_passes: int = 2) -> Localisation:
+             max_contacts: int | None = None, kinds=INNER_SIDE, swap_passes: int = 2,
+             force_scale_n: float | None = 20.0) -> Localisation:
     """Localise the contacts at one quasi-static moment.
 
     Args:
@@ -201,7 +214,12 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
         chi2_gain: a contact is kept when it lowers the residual sum of squares by at least
             ``chi2_gain * sigma_nm**2``.
         max_contacts: cap on the number of contacts (None: one per link at most).
-        kinds: the candidate kinds considered (default: all faces and corners).
+        force_scale_n: a ridge ``(sigma_nm / force_scale_n)^2`` on the generator weights, N (None:
+            none): breaks ties the torques cannot (a straight proximal chain is blind to the force
+            component along itself) in favour of the smallest forces; negligible where the
+            torques decide.
+        kinds: the candidate kinds considered (default :data:`INNER_SIDE`, plus the tip's distal
+            face and corner; :data:`KINDS` for every face and corner).
 
     Returns:
         a :class:`Localisation`.
@@ -224,7 +242,14 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
             cache[c] = _columns(spec, Tl, *c)
         return cache[c]
 
+    ridge = (sigma_nm / force_scale_n) ** 2 if force_scale_n else 0.0
+
+    def _fit(cols, t):  # noqa: F811 (the module's fit with this call's ridge)
+        return _fit_module(cols, t, ridge=ridge)
+
     cand = [(i, k) for i in range(top + 1) for k in kinds]
+    if tuple(kinds) == INNER_SIDE and top == n - 1:
+        cand += [(n - 1, k) for k in TIP_EXTRA]
     cap = n if max_contacts is None else max_contacts
 
     def rss_of(cs):
@@ -285,15 +310,16 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
     x, rss = _fit([col(c) for c in chosen], tau)
     A = np.concatenate([col(c) for c in chosen], axis=1) if chosen else np.zeros((n, 0))
     pred = A @ x if chosen else np.zeros(n)
+    rss = float(np.sum((tau - pred) ** 2))
     # covariance on the active generators
     active = x > 1e-12
     cov = np.zeros((len(x), len(x)))
     if active.any():
         Aa = A[:, active]
         try:
-            cov_a = sigma_nm ** 2 * np.linalg.inv(Aa.T @ Aa)
+            cov_a = sigma_nm ** 2 * np.linalg.inv(Aa.T @ Aa + ridge * np.eye(Aa.shape[1]))
         except np.linalg.LinAlgError:
-            cov_a = sigma_nm ** 2 * np.linalg.pinv(Aa.T @ Aa)
+            cov_a = sigma_nm ** 2 * np.linalg.pinv(Aa.T @ Aa + ridge * np.eye(Aa.shape[1]))
         idx = np.flatnonzero(active)
         cov[np.ix_(idx, idx)] = cov_a
     contacts = []

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import pickle
 import sys
 import time
 
@@ -26,8 +27,8 @@ from explore3d import ExploreConfig, load_arm, load_object
 from explore3d.band import cached_band
 from explore3d.encircle import ControlConfig, run_wrap
 from explore3d.explore import rough_bound, wrap_poses
-from explore3d.kinematics import gravity_torques
-from explore3d.localise import inverse_dynamics, localise
+from explore3d.kinematics import gravity_torques, link_transforms
+from explore3d.localise import INNER_SIDE, KINDS, inverse_dynamics, localise
 from explore3d.robot import JointCommand, JointReading, RecordingRobot, Robot
 from explore3d.sensing import SensorConfig
 from explore3d.sim import ArmSimulation
@@ -69,17 +70,18 @@ class ObservingRobot(Robot):
         return r
 
 
-def score_moment(spec, T, q, tau_ext, truth, sigma):
+def score_moment(spec, T, q, tau_ext, truth, sigma, **loc_kw):
     """Localise at one moment and score against the true contacts ``truth`` (list of rows)."""
     Tinv = np.linalg.inv(T)
     t0 = time.perf_counter()
-    loc = localise(spec, q, tau_ext, T, sigma_nm=sigma)
+    loc = localise(spec, q, tau_ext, T, sigma_nm=sigma, **loc_kw)
     solve_s = time.perf_counter() - t0
     # true contacts per link: points (base frame) and force; the link's centre of pressure
     by_link: dict = {}
+    Tl = link_transforms(spec, q, T)
     for link, p, nrm, f in truth:
         pb = Tinv[:3, :3] @ p + Tinv[:3, 3]
-        by_link.setdefault(link, []).append((pb, f))
+        by_link.setdefault(link, []).append((pb, f, Tl[link, :3, :3].T @ nrm, Tl[link, :3, :3].T @ (p - Tl[link, :3, 3])))
     true_links = {}
     for link, rows in by_link.items():
         P = np.array([r[0] for r in rows])
@@ -88,11 +90,12 @@ def score_moment(spec, T, q, tau_ext, truth, sigma):
         if F.sum() > 0:
             cands.append((F[:, None] * P).sum(0) / F.sum())
         true_links[link] = {"cands": np.array(cands), "force": float(F.sum()), "loaded": bool(F.max() >= LOADED),
-                            "n_points": len(rows)}
+                            "n_points": len(rows), "normals_link": [r[2].round(3).tolist() for r in rows],
+                            "points_link": [(1e3 * r[3]).round(2).tolist() for r in rows], "forces": F.tolist()}
     found = []
     for c in loc.contacts:
         pb = Tinv[:3, :3] @ c.point_world + Tinv[:3, 3]
-        rec = {"link": c.link, "kind": c.kind, "force": c.force_n, "sigma_along": c.sigma_along_m,
+        rec = {"link": c.link, "kind": c.kind, "point_link_mm": (1e3 * c.point_link).round(2).tolist(), "force": c.force_n, "sigma_along": c.sigma_along_m,
                "err2d": None, "err3d": None, "err2d_any": None}
         if c.link in true_links:
             C = true_links[c.link]["cands"]
@@ -107,7 +110,8 @@ def score_moment(spec, T, q, tau_ext, truth, sigma):
     for link, v in sorted(true_links.items()):
         hit = [f for f in found if f["link"] == link and f["err2d"] is not None and f["err2d"] <= RADIUS_OK]
         truth_out.append({"link": link, "force": v["force"], "loaded": v["loaded"], "n_points": v["n_points"],
-                          "recalled": bool(hit)})
+                          "recalled": bool(hit), "normals_link": v["normals_link"], "points_link_mm": v["points_link"],
+                          "forces": v["forces"]})
     return {"found": found, "truth": truth_out, "rms_residual": loc.residual_nm, "solve_s": solve_s}
 
 
@@ -146,15 +150,27 @@ def run(obj_name, mode, sensing, directions, angles, attempts, settle, jobs_note
                         ddq = (dq - log.dq[row - 1]) / log.dt  # backward difference (causal)
                         dyn = inverse_dynamics(spec, q, dq, ddq) + static
                         truth = obs.motions[ai][max(step - d, 0)]
-                        for variant, tau_ext in ((moment, static), (moment + "+ID", dyn)):
-                            r = score_moment(spec, T, q, tau_ext, truth, sigma)
-                            r.update({"object": obj_name, "mode": mode, "sensing": sensing, "settle": settle,
-                                      "wrap": wi, "attempt": ai, "joint": int(k), "moment": variant,
-                                      "max_dq": float(np.max(np.abs(dq))), "sigma": sigma})
-                            out.append(r)
+                        out.append({"object": obj_name, "mode": mode, "sensing": sensing, "settle": settle,
+                                    "wrap": wi, "attempt": ai, "joint": int(k), "moment": moment, "T": T, "q": q,
+                                    "static": static, "dyn": dyn, "truth": truth,
+                                    "max_dq": float(np.max(np.abs(dq))), "sigma": sigma})
             print(f"{obj_name} {mode} {sensing} settle={settle} wrap {wi + 1}/{len(poses)} "
                   f"{time.perf_counter() - t0:.0f}s steps={world.steps}", file=sys.stderr, flush=True)
     return out, time.perf_counter() - t0, world.steps
+
+
+def score_all(moments, **loc_kw):
+    """Localise every stored moment (static and +ID variants) and score it."""
+    spec = load_arm("default")
+    out = []
+    for m in moments:
+        for variant, key in ((m["moment"], "static"), (m["moment"] + "+ID", "dyn")):
+            r = score_moment(spec, m["T"], m["q"], m[key], m["truth"], m["sigma"], **loc_kw)
+            r.update({k: m[k] for k in ("object", "mode", "sensing", "settle", "wrap", "attempt", "joint", "max_dq",
+                                        "sigma")})
+            r["moment"] = variant
+            out.append(r)
+    return out
 
 
 def pct(x, p):
@@ -166,8 +182,8 @@ def summarise(rows, key=("object", "mode", "sensing", "settle", "moment")):
     for r in rows:
         groups.setdefault(tuple(r[k] for k in key), []).append(r)
     lines = ["| object | mode | sensing | settle | moment | moments | max dq median (rad/s) | found | in-plane median / p90 (mm) "
-             "| 3D median / p90 (mm) | precision 3 mm | recall 3 mm (loaded) | recall 3 mm (all) | any-link in-plane median / p90 (mm) |",
-             "|---" * 14 + "|"]
+             "| 3D median / p90 (mm) | precision 3 mm | recall 3 mm: all | >= 1e-3 N | >= 0.1 N | >= 1 N | any-link in-plane median / p90 (mm) |",
+             "|---" * 17 + "|"]
     for g, rs in sorted(groups.items()):
         found = [f for r in rs for f in r["found"]]
         e2 = np.array([f["err2d"] for f in found if f["err2d"] is not None])
@@ -175,12 +191,13 @@ def summarise(rows, key=("object", "mode", "sensing", "settle", "moment")):
         ea = np.array([f["err2d_any"] for f in found if f["err2d_any"] is not None])
         prec = np.mean([f["err2d"] is not None and f["err2d"] <= RADIUS_OK for f in found]) if found else float("nan")
         tl = [t for r in rs for t in r["truth"]]
-        rec_l = np.mean([t["recalled"] for t in tl if t["loaded"]]) if any(t["loaded"] for t in tl) else float("nan")
-        rec_a = np.mean([t["recalled"] for t in tl]) if tl else float("nan")
+        def rec(fmin):
+            sel = [t["recalled"] for t in tl if (t["loaded"] if fmin == LOADED else t["force"] >= fmin)]
+            return f"{100 * np.mean(sel):.1f}% ({len(sel)})" if sel else "-"
         dq = np.median([r["max_dq"] for r in rs])
         lines.append(f"| {' | '.join(str(x) for x in g)} | {len(rs)} | {dq:.3f} | {len(found)} | "
                      f"{1e3 * pct(e2, 50):.2f} / {1e3 * pct(e2, 90):.2f} | {1e3 * pct(e3, 50):.2f} / {1e3 * pct(e3, 90):.2f} | "
-                     f"{100 * prec:.1f}% | {100 * rec_l:.1f}% ({sum(t['loaded'] for t in tl)}) | {100 * rec_a:.1f}% ({len(tl)}) | "
+                     f"{100 * prec:.1f}% | {rec(0.0)} | {rec(LOADED)} | {rec(0.1)} | {rec(1.0)} | "
                      f"{1e3 * pct(ea, 50):.2f} / {1e3 * pct(ea, 90):.2f} |")
     return "\n".join(lines)
 
@@ -194,23 +211,40 @@ def main():
     ap.add_argument("--angles", type=int, default=1)
     ap.add_argument("--attempts", type=int, default=1)
     ap.add_argument("--settle", nargs="+", type=int, default=[3])
-    ap.add_argument("--out")
-    ap.add_argument("--summarise", nargs="*")
+    ap.add_argument("--moments", help="simulate and store the moments here (.pkl)")
+    ap.add_argument("--score", nargs="*", help="score stored moments (.pkl files)")
+    ap.add_argument("--kinds", default="inner-side", choices=["inner-side", "all"])
+    ap.add_argument("--chi2", type=float, default=25.0)
+    ap.add_argument("--out", help="scored rows (.json)")
+    ap.add_argument("--summarise", nargs="*", help="tables of scored rows (.json files)")
     a = ap.parse_args()
     if a.summarise:
         rows = [r for p in a.summarise for r in json.load(open(p))["rows"]]
         print(summarise(rows))
         return
-    rows, meta = [], []
-    for obj in a.objects:
-        for s in a.sensing:
-            for st in a.settle:
-                r, wall, steps = run(obj, a.mode, s, a.directions, a.angles, a.attempts, st)
-                rows += r
-                meta.append({"object": obj, "sensing": s, "settle": st, "wall_s": wall, "steps": steps})
+    if a.score is None:
+        moments, meta = [], []
+        for obj in a.objects:
+            for s in a.sensing:
+                for st in a.settle:
+                    m, wall, steps = run(obj, a.mode, s, a.directions, a.angles, a.attempts, st)
+                    moments += m
+                    meta.append({"object": obj, "sensing": s, "settle": st, "wall_s": wall, "steps": steps})
+        with open(a.moments, "wb") as f:
+            pickle.dump({"meta": meta, "args": vars(a), "moments": moments}, f)
+        print(json.dumps(meta))
+        return
+    moments = []
+    for p in a.score:
+        with open(p, "rb") as f:
+            moments += pickle.load(f)["moments"]
+    kinds = INNER_SIDE if a.kinds == "inner-side" else KINDS
+    t0 = time.perf_counter()
+    rows = score_all(moments, kinds=kinds, chi2_gain=a.chi2)
+    wall = time.perf_counter() - t0
     if a.out:
-        json.dump({"meta": meta, "args": vars(a), "rows": rows}, open(a.out, "w"))
-    print(json.dumps(meta))
+        json.dump({"args": vars(a), "score_s": wall, "rows": rows}, open(a.out, "w"))
+    print(f"localised {len(rows)} moments in {wall:.1f} s ({1e3 * wall / max(len(rows), 1):.0f} ms each)")
     print(summarise(rows))
 
 
