@@ -107,8 +107,14 @@ class LocalContact:
         normal_world: (3,) unit in-plane direction of that force (the contact normal, pointing
             into the link).
         force_n: |force|, N.
-        sigma_along_m: 1-sigma uncertainty of the position along the outline, metres (0 at a corner:
-            the position is the corner's; the force direction is what is uncertain there).
+        sigma_along_m: 1-sigma uncertainty of the position along the outline, metres, from the fit's
+            covariance (0 at a corner: the position is the corner's; the force direction is what is
+            uncertain there).
+        along_interval_m: (lo, hi) the positions along the link, x in the link frame, metres, at
+            which a single contact (face point with its normal force, or a corner with its cone)
+            fits the torques within ``profile_chi2 * sigma^2`` of the best, the others held: the
+            honest uncertainty where the geometry is degenerate (e.g. a straight proximal chain does
+            not see the force along itself, so a face point and an oblique corner force fit alike).
     """
 
     link: int
@@ -121,6 +127,7 @@ class LocalContact:
     normal_world: np.ndarray
     force_n: float
     sigma_along_m: float
+    along_interval_m: tuple = (float("nan"), float("nan"))
 
 
 @dataclass(frozen=True)
@@ -202,7 +209,7 @@ def _fit_module(cols: list, tau: np.ndarray, fmax: float = MAX_FORCE_N, ridge: f
 
 def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0e-3, chi2_gain: float = 25.0,
              max_contacts: int | None = None, kinds=INNER_SIDE, swap_passes: int = 2,
-             force_scale_n: float | None = 20.0) -> Localisation:
+             force_scale_n: float | None = 20.0, profile_chi2: float = 4.0) -> Localisation:
     """Localise the contacts at one quasi-static moment.
 
     Args:
@@ -218,6 +225,7 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
             none): breaks ties the torques cannot (a straight proximal chain is blind to the force
             component along itself) in favour of the smallest forces; negligible where the
             torques decide.
+        profile_chi2: the profile threshold of :attr:`LocalContact.along_interval_m` (in sigma^2).
         kinds: the candidate kinds considered (default :data:`INNER_SIDE`, plus the tip's distal
             face and corner; :data:`KINDS` for every face and corner).
 
@@ -322,6 +330,33 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
             cov_a = sigma_nm ** 2 * np.linalg.pinv(Aa.T @ Aa + ridge * np.eye(Aa.shape[1]))
         idx = np.flatnonzero(active)
         cov[np.ix_(idx, idx)] = cov_a
+    # profile of the fit along each contact's link: a point contact at each x of the inner face
+    # (its normal force) and the two inner corners (their cones), the other contacts refitted
+    prof_x = np.linspace(0.0, spec.link_length, 41)
+
+    def profile(m):
+        link = chosen[m][0]
+        base = [col(c) for c in chosen[:m] + chosen[m + 1:]]
+        R, o = Tl[link, :2, :2], Tl[link, :2, 3]
+        F = R @ np.array([0.0, -1.0])
+        origins = Tl[: link + 1, :2, 3]
+        best = _fit(base + [col(chosen[m])], tau)[1]
+        ok = []
+        for x in prof_x:
+            P = R @ np.array([x, spec.link_width / 2]) + o
+            c1 = np.zeros((n, 1))
+            r = P[None, :] - origins
+            c1[: link + 1, 0] = r[:, 0] * F[1] - r[:, 1] * F[0]
+            cols = [c1]
+            if x == 0.0:
+                cols = [col((link, "corner_pi"))]
+            elif x == spec.link_length:
+                cols = [col((link, "corner_di"))]
+            rr = _fit(base + cols, tau)[1]
+            if rr <= best + profile_chi2 * sigma_nm ** 2:
+                ok.append(x)
+        return (min(ok), max(ok)) if ok else (float("nan"), float("nan"))
+
     contacts = []
     H = spec.link_height
     for m, (link, kind) in enumerate(chosen):
@@ -349,9 +384,11 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
         Fw = Tw[:3, :3] @ np.array([f2[0], f2[1], 0.0])
         fn = float(np.linalg.norm(Fw))
         seg_w = np.array([Tw[:3, :3] @ (p_link + [0, 0, z]) + Tw[:3, 3] for z in (-H / 2, H / 2)])
+        iv = profile(m) if kind in INNER_SIDE else (float("nan"), float("nan"))
         contacts.append(LocalContact(link=int(link), kind=kind, point_link=p_link, point_world=pw,
                                      height_interval=(-H / 2, H / 2), segment_world=seg_w, force_world=Fw,
-                                     normal_world=Fw / fn if fn > 0 else Fw, force_n=fn, sigma_along_m=sig_s))
+                                     normal_world=Fw / fn if fn > 0 else Fw, force_n=fn, sigma_along_m=sig_s,
+                                     along_interval_m=iv))
     return Localisation(tuple(contacts), float(np.sqrt(rss / n)), rss0, rss, sigma_nm, pred)
 
 

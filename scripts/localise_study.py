@@ -95,7 +95,8 @@ def score_moment(spec, T, q, tau_ext, truth, sigma, **loc_kw):
     found = []
     for c in loc.contacts:
         pb = Tinv[:3, :3] @ c.point_world + Tinv[:3, 3]
-        rec = {"link": c.link, "kind": c.kind, "point_link_mm": (1e3 * c.point_link).round(2).tolist(), "force": c.force_n, "sigma_along": c.sigma_along_m,
+        rec = {"interval_mm": [1e3 * c.along_interval_m[0], 1e3 * c.along_interval_m[1]],
+               "link": c.link, "kind": c.kind, "point_link_mm": (1e3 * c.point_link).round(2).tolist(), "force": c.force_n, "sigma_along": c.sigma_along_m,
                "err2d": None, "err3d": None, "err2d_any": None}
         if c.link in true_links:
             C = true_links[c.link]["cands"]
@@ -215,6 +216,7 @@ def main():
     ap.add_argument("--score", nargs="*", help="score stored moments (.pkl files)")
     ap.add_argument("--kinds", default="inner-side", choices=["inner-side", "all"])
     ap.add_argument("--chi2", type=float, default=25.0)
+    ap.add_argument("--only", nargs="*", default=[], help="score only moments with these key=value (e.g. settle=30)")
     ap.add_argument("--out", help="scored rows (.json)")
     ap.add_argument("--summarise", nargs="*", help="tables of scored rows (.json files)")
     a = ap.parse_args()
@@ -238,6 +240,9 @@ def main():
     for p in a.score:
         with open(p, "rb") as f:
             moments += pickle.load(f)["moments"]
+    for kv in a.only:
+        k, v = kv.split("=")
+        moments = [m for m in moments if str(m[k]) == v]
     kinds = INNER_SIDE if a.kinds == "inner-side" else KINDS
     t0 = time.perf_counter()
     rows = score_all(moments, kinds=kinds, chi2_gain=a.chi2)

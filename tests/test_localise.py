@@ -106,3 +106,21 @@ def test_uncertainty_scales_with_noise_over_force():
     a = localise(SPEC, q, tau, None, sigma_nm=1e-4).contacts[0].sigma_along_m
     b = localise(SPEC, q, 0.1 * tau, None, sigma_nm=1e-4).contacts[0].sigma_along_m
     assert 0 < a < 1e-4 and b == pytest.approx(10 * a, rel=1e-6)
+
+
+def test_interval_contains_truth_and_is_tight_when_exact():
+    q = _config(4)
+    W = SPEC.link_width
+    tau = _tau(q, None, [(12, [0.007, W / 2, 0.0], [0.0, -2.0, 0.0])])
+    c = localise(SPEC, q, tau, None, sigma_nm=1e-4).contacts[0]
+    lo, hi = c.along_interval_m
+    assert lo <= 0.007 <= hi and hi - lo <= 1.5e-3
+
+
+def test_tip_distal_face():
+    q = _config(6)
+    n = SPEC.n_links
+    tau = _tau(q, None, [(n - 1, [SPEC.link_length, 0.001, 0.0], [-0.5, 0.0, 0.0])])
+    c = localise(SPEC, q, tau, None, sigma_nm=1e-7).contacts[0]
+    assert c.link == n - 1 and c.kind == "distal"
+    assert np.allclose(c.point_link, [SPEC.link_length, 0.001, 0.0], atol=1e-6)
