@@ -332,16 +332,16 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
         cov[np.ix_(idx, idx)] = cov_a
     # profile of the fit along each contact's link: a point contact at each x of the inner face
     # (its normal force) and the two inner corners (their cones), the other contacts refitted
-    prof_x = np.linspace(0.0, spec.link_length, 41)
+    prof_x = np.linspace(0.0, spec.link_length, 401)
 
-    def profile(m):
+    def profile(m, x_est):
         link = chosen[m][0]
         base = [col(c) for c in chosen[:m] + chosen[m + 1:]]
         R, o = Tl[link, :2, :2], Tl[link, :2, 3]
         F = R @ np.array([0.0, -1.0])
         origins = Tl[: link + 1, :2, 3]
         best = _fit(base + [col(chosen[m])], tau)[1]
-        ok = []
+        ok = [x_est]
         for x in prof_x:
             P = R @ np.array([x, spec.link_width / 2]) + o
             c1 = np.zeros((n, 1))
@@ -355,7 +355,7 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
             rr = _fit(base + cols, tau)[1]
             if rr <= best + profile_chi2 * sigma_nm ** 2:
                 ok.append(x)
-        return (min(ok), max(ok)) if ok else (float("nan"), float("nan"))
+        return min(ok), max(ok)
 
     contacts = []
     H = spec.link_height
@@ -384,7 +384,7 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
         Fw = Tw[:3, :3] @ np.array([f2[0], f2[1], 0.0])
         fn = float(np.linalg.norm(Fw))
         seg_w = np.array([Tw[:3, :3] @ (p_link + [0, 0, z]) + Tw[:3, 3] for z in (-H / 2, H / 2)])
-        iv = profile(m) if kind in INNER_SIDE else (float("nan"), float("nan"))
+        iv = profile(m, float(p_link[0])) if kind in INNER_SIDE else (float("nan"), float("nan"))
         contacts.append(LocalContact(link=int(link), kind=kind, point_link=p_link, point_world=pw,
                                      height_interval=(-H / 2, H / 2), segment_world=seg_w, force_world=Fw,
                                      normal_world=Fw / fn if fn > 0 else Fw, force_n=fn, sigma_along_m=sig_s,

@@ -120,14 +120,14 @@ def score_moment(spec, T, q, tau_ext, truth, sigma, **loc_kw):
     return {"found": found, "truth": truth_out, "rms_residual": loc.residual_nm, "solve_s": solve_s}
 
 
-def run(obj_name, mode, sensing, directions, angles, attempts, settle, jobs_note=""):
+def run(obj_name, mode, sensing, directions, angles, attempts, settle, hold_bias=0.0):
     spec = load_arm("default")
     mesh = load_object(obj_name)
     sensors = SensorConfig() if sensing == "default" else SensorConfig.ideal()
     cfg = ExploreConfig(mode=mode, directions=directions, angles=angles, attempts=attempts, sensors=sensors)
     # the band is calibrated with the default controller; a longer settle only changes holds
     band = cached_band(spec, cfg.control, cfg.sim, sensors, mode == "planar")
-    control = dataclasses.replace(cfg.control, settle_steps=settle)
+    control = dataclasses.replace(cfg.control, settle_steps=settle, hold_bias=hold_bias)
     poses = wrap_poses(spec, cfg, *rough_bound(mesh.vertices))
     # sigma of each external torque: the sensor's noise and quantisation (plus a floor for the model)
     sig = float(np.hypot(sensors.torque_noise_nm, sensors.torque_resolution_nm / np.sqrt(12.0)))
@@ -157,6 +157,7 @@ def run(obj_name, mode, sensing, directions, angles, attempts, settle, jobs_note
                         truth = obs.motions[ai][max(step - d, 0)]
                         out.append({"object": obj_name, "mode": mode, "sensing": sensing, "settle": settle,
                                     "wrap": wi, "attempt": ai, "joint": int(k), "moment": moment, "T": T, "q": q,
+                                    "hold_bias": hold_bias,
                                     "static": static, "dyn": dyn, "truth": truth,
                                     "max_dq": float(np.max(np.abs(dq))), "sigma": sigma})
             print(f"{obj_name} {mode} {sensing} settle={settle} wrap {wi + 1}/{len(poses)} "
@@ -171,6 +172,7 @@ def score_all(moments, **loc_kw):
     for m in moments:
         for variant, key in ((m["moment"], "static"), (m["moment"] + "+ID", "dyn")):
             r = score_moment(spec, m["T"], m["q"], m[key], m["truth"], m["sigma"], **loc_kw)
+            r["hold_bias"] = m.get("hold_bias", 0.0)
             r.update({k: m[k] for k in ("object", "mode", "sensing", "settle", "wrap", "attempt", "joint", "max_dq",
                                         "sigma")})
             r["moment"] = variant
@@ -183,12 +185,14 @@ def pct(x, p):
 
 
 def summarise(rows, key=("object", "mode", "sensing", "settle", "moment")):
+    if any(r.get("hold_bias", 0.0) for r in rows):
+        rows = [dict(r, settle=f"{r['settle']} (bias {r.get('hold_bias', 0.0):g})") for r in rows]
     groups: dict = {}
     for r in rows:
         groups.setdefault(tuple(r[k] for k in key), []).append(r)
     lines = ["| object | mode | sensing | settle | moment | moments | max dq median (rad/s) | found | in-plane median / p90 (mm) "
              "| 3D median / p90 (mm) | 3D to segment median / p90 (mm) | precision 3 mm | recall 3 mm: all | >= 1e-3 N | >= 0.1 N | >= 1 N | any-link in-plane median / p90 (mm) |",
-             "|---" * 18 + "|"]
+             "|---" * 17 + "|"]
     for g, rs in sorted(groups.items()):
         found = [f for r in rs for f in r["found"]]
         e2 = np.array([f["err2d"] for f in found if f["err2d"] is not None])
@@ -217,6 +221,7 @@ def main():
     ap.add_argument("--angles", type=int, default=1)
     ap.add_argument("--attempts", type=int, default=1)
     ap.add_argument("--settle", nargs="+", type=int, default=[3])
+    ap.add_argument("--hold-bias", type=float, default=0.0, help="ControlConfig.hold_bias, rad")
     ap.add_argument("--moments", help="simulate and store the moments here (.pkl)")
     ap.add_argument("--score", nargs="*", help="score stored moments (.pkl files)")
     ap.add_argument("--kinds", default="inner-side", choices=["inner-side", "all"])
@@ -234,7 +239,7 @@ def main():
         for obj in a.objects:
             for s in a.sensing:
                 for st in a.settle:
-                    m, wall, steps = run(obj, a.mode, s, a.directions, a.angles, a.attempts, st)
+                    m, wall, steps = run(obj, a.mode, s, a.directions, a.angles, a.attempts, st, a.hold_bias)
                     moments += m
                     meta.append({"object": obj, "sensing": s, "settle": st, "wall_s": wall, "steps": steps})
         with open(a.moments, "wb") as f:
