@@ -30,7 +30,7 @@ from explore3d.skin import ideal_skin
 
 def localised_points(ex, sigma):
     spec = ex.spec
-    pts, wraps, forces = [], [], []
+    pts, wraps, forces, keys = [], [], [], []
     for wi, (atts, log) in enumerate(zip(ex.attempts, ex.logs)):
         for ai, att in enumerate(atts):
             s0, T = int(log.start_index[ai]), log.base_T[ai]
@@ -42,7 +42,23 @@ def localised_points(ex, sigma):
                     pts.append(c.point_world)
                     wraps.append(wi)
                     forces.append(c.force_n)
-    return np.array(pts).reshape(-1, 3), np.array(wraps, int), np.array(forces)
+                    keys.append((wi, ai, c.link))
+    return np.array(pts).reshape(-1, 3), np.array(wraps, int), np.array(forces), keys
+
+
+def corrected_points(ex, P, W, keys):
+    """The link points of the contact-flagged links, except that a flagged link with a contact
+    localised on it (at any settled moment of that attempt) is replaced by its located point(s)."""
+    located = {}
+    for p, k in zip(P, keys):
+        located.setdefault(k, []).append(p)
+    keep = np.array([(int(w), int(a), int(l)) not in located for w, a, l in
+                     zip(ex.point_wrap, ex.point_attempt, ex.point_link)], bool)
+    d = ex.points.shape[1]
+    extra = [(p[:d], k[0]) for k, ps in located.items() for p in ps]
+    pts = np.concatenate([ex.points[keep], np.array([e[0] for e in extra]).reshape(-1, d)])
+    wr = np.concatenate([ex.point_wrap[keep], np.array([e[1] for e in extra], int)])
+    return pts, wr
 
 
 def main():
@@ -62,10 +78,12 @@ def main():
         t0 = time.perf_counter()
         res = run(mesh, "default", cfg)
         ex = res.exploration
-        P, W, F = localised_points(ex, sigma)
+        P, W, F, keys = localised_points(ex, sigma)
+        CP, CW = corrected_points(ex, P, W, keys)
         skin = ideal_skin(ex, mesh)
         cols = [_column("link points (paper)", ex.points, ex.point_wrap, res, 0),
                 _column("localised (torques)", P, W, res, 0),
+                _column("link points, located links replaced", CP, CW, res, 0),
                 _column("ideal skin, loaded", skin.points[skin.loaded], skin.wrap[skin.loaded], res, 0)]
         rep = {"mode": "planar", "columns": [c.to_dict() for c in cols], "wall_s": time.perf_counter() - t0,
                "steps": ex.steps, "n_localised": int(len(P))}
