@@ -48,7 +48,7 @@ from scipy.optimize import nnls
 from .arm import ArmSpec
 from .kinematics import link_transforms
 
-__all__ = ["LocalContact", "Localisation", "localise", "external_torques", "link_outline", "KINDS", "INNER_SIDE", "inverse_dynamics",
+__all__ = ["LocalContact", "Localisation", "localise", "external_torques", "link_outline", "KINDS", "INNER_SIDE", "INNER_SIDE_ROUNDED", "inverse_dynamics",
            "torques_of_contacts"]
 
 #: Candidate kinds on a link's in-plane outline: four faces, four corners.
@@ -61,6 +61,11 @@ KINDS = ("inner", "outer", "distal", "proximal", "corner_di", "corner_do", "corn
 #: no lever and fits anything with a huge magnitude).
 INNER_SIDE = ("inner", "corner_di", "corner_pi")
 TIP_EXTRA = ("distal", "corner_do")
+
+#: :data:`INNER_SIDE` plus points 0.5, 1 and 2 mm from the inner corners with the corner's cone of
+#: forces (PyBullet's collision margin rounds the links' edges: contacts within about a millimetre
+#: of a corner carry normals tilted by a few degrees).
+INNER_SIDE_ROUNDED = INNER_SIDE + tuple(f"near_{c}_{d}" for c in ("di", "pi") for d in ("0.5", "1.0", "2.0"))
 
 
 def link_outline(spec: ArmSpec):
@@ -84,6 +89,13 @@ def _generators(spec: ArmSpec, kind: str):
     if kind in faces:
         a, b, n = faces[kind]
         return [(c[a], n), (c[b], n)]
+    if kind.startswith("near_"):  # near_di_1.0: a point 1.0 mm from the corner along the inner face,
+        # force in the corner's cone (a rounded edge: PyBullet's margin tilts normals there)
+        _, name, d = kind.split("_")
+        d = float(d) * 1e-3
+        step = np.array([-d, 0.0]) if name[0] == "d" else np.array([d, 0.0])
+        normals = [n for f, (a, b, n) in faces.items() if name in (a, b)]
+        return [(c[name] + step, normals[0]), (c[name] + step, normals[1])]
     name = kind.split("_")[1]
     normals = [n for f, (a, b, n) in faces.items() if name in (a, b)]
     return [(c[name], normals[0]), (c[name], normals[1])]
@@ -208,8 +220,8 @@ def _fit_module(cols: list, tau: np.ndarray, fmax: float = MAX_FORCE_N, ridge: f
 
 
 def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0e-3, chi2_gain: float = 25.0,
-             max_contacts: int | None = None, kinds=INNER_SIDE, swap_passes: int = 2,
-             force_scale_n: float | None = 20.0, profile_chi2: float = 4.0) -> Localisation:
+             max_contacts: int | None = None, kinds=None, swap_passes: int = 2,
+             force_scale_n: float | None = 20.0, profile_chi2: float = 4.0, position_sigma_m: float = 0.0) -> Localisation:
     """Localise the contacts at one quasi-static moment.
 
     Args:
@@ -225,13 +237,18 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
             none): breaks ties the torques cannot (a straight proximal chain is blind to the force
             component along itself) in favour of the smallest forces; negligible where the
             torques decide.
+        position_sigma_m: model error of the joint positions, metres (e.g. the encoder's quantisation
+            times a typical lever): each further contact must then also beat
+            ``chi2_gain * (position_sigma_m * F_max)^2``, F_max the largest located force.
         profile_chi2: the profile threshold of :attr:`LocalContact.along_interval_m` (in sigma^2).
-        kinds: the candidate kinds considered (default :data:`INNER_SIDE`, plus the tip's distal
-            face and corner; :data:`KINDS` for every face and corner).
+        kinds: the candidate kinds considered (None: :data:`INNER_SIDE_ROUNDED`; with it or
+            :data:`INNER_SIDE` the tip's distal face and outer distal corner are added;
+            :data:`KINDS` for every face and corner).
 
     Returns:
         a :class:`Localisation`.
     """
+    kinds = INNER_SIDE_ROUNDED if kinds is None else kinds
     q = np.asarray(q, float)
     tau = np.asarray(tau_ext, float)
     n = spec.n_links
@@ -256,7 +273,7 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
         return _fit_module(cols, t, ridge=ridge)
 
     cand = [(i, k) for i in range(top + 1) for k in kinds]
-    if tuple(kinds) == INNER_SIDE and top == n - 1:
+    if tuple(kinds) in (INNER_SIDE, INNER_SIDE_ROUNDED) and top == n - 1:
         cand += [(n - 1, k) for k in TIP_EXTRA]
     cap = n if max_contacts is None else max_contacts
 
@@ -288,6 +305,15 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
                 break
         return cs, r
 
+    def thresh_of(cs):
+        """The significance threshold: torque noise, plus the model error that grows with the
+        force (angle quantisation moves the modelled joints by about ``position_sigma_m``)."""
+        if not position_sigma_m or not cs:
+            return thresh
+        x = _fit([col(c) for c in cs], tau)[0]
+        fmax = float(np.max(x.reshape(-1, 2).sum(axis=1)))
+        return chi2_gain * (sigma_nm ** 2 + (position_sigma_m * fmax) ** 2)
+
     # local search on rss + thresh * (number of contacts): greedy additions with swaps, then
     # removals (each followed by re-choosing the others: two contacts may merge into one)
     chosen: list = []
@@ -302,9 +328,10 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
             r = _fit(base + [col(c)], tau)[1]
             if r < best_rss:
                 best, best_rss = c, r
-        if best is None or rss - best_rss < thresh:
+        if best is None or rss - best_rss < thresh_of(chosen + [best]):
             break
         chosen, rss = polish(chosen + [best], best_rss)
+    thresh = thresh_of(chosen)
     improved = True
     while improved and chosen:
         improved = False
@@ -366,7 +393,7 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
         tot = float(w.sum())
         if tot <= 0:
             continue
-        if kind.startswith("corner"):
+        if kind.startswith(("corner", "near")):
             p2 = pa
             f2 = w[0] * fa + w[1] * fb
             sig_s = 0.0
@@ -384,7 +411,7 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
         Fw = Tw[:3, :3] @ np.array([f2[0], f2[1], 0.0])
         fn = float(np.linalg.norm(Fw))
         seg_w = np.array([Tw[:3, :3] @ (p_link + [0, 0, z]) + Tw[:3, 3] for z in (-H / 2, H / 2)])
-        iv = profile(m, float(p_link[0])) if kind in INNER_SIDE else (float("nan"), float("nan"))
+        iv = profile(m, float(p_link[0])) if kind in INNER_SIDE_ROUNDED else (float("nan"), float("nan"))
         contacts.append(LocalContact(link=int(link), kind=kind, point_link=p_link, point_world=pw,
                                      height_interval=(-H / 2, H / 2), segment_world=seg_w, force_world=Fw,
                                      normal_world=Fw / fn if fn > 0 else Fw, force_n=fn, sigma_along_m=sig_s,

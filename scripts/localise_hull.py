@@ -28,7 +28,7 @@ from explore3d.sensing import SensorConfig
 from explore3d.skin import ideal_skin
 
 
-def localised_points(ex, sigma):
+def localised_points(ex, sigma, pos_sigma=0.0):
     spec = ex.spec
     pts, wraps, forces, keys = [], [], [], []
     for wi, (atts, log) in enumerate(zip(ex.attempts, ex.logs)):
@@ -38,7 +38,7 @@ def localised_points(ex, sigma):
                 row = s0 + int(att.detect_step[k])
                 q, tau = log.q[row], log.tau[row]
                 tau_ext = -(tau + gravity_torques(spec, q, T, log.gravity))
-                for c in localise(spec, q, tau_ext, T, sigma_nm=sigma).contacts:
+                for c in localise(spec, q, tau_ext, T, sigma_nm=sigma, position_sigma_m=pos_sigma).contacts:
                     pts.append(c.point_world)
                     wraps.append(wi)
                     forces.append(c.force_n)
@@ -78,7 +78,7 @@ def main():
         t0 = time.perf_counter()
         res = run(mesh, "default", cfg)
         ex = res.exploration
-        P, W, F, keys = localised_points(ex, sigma)
+        P, W, F, keys = localised_points(ex, sigma, 1e-4 if a.sensing == "default" else 0.0)
         CP, CW = corrected_points(ex, P, W, keys)
         skin = ideal_skin(ex, mesh)
         cols = [_column("link points (paper)", ex.points, ex.point_wrap, res, 0),

@@ -28,7 +28,7 @@ from explore3d.band import cached_band
 from explore3d.encircle import ControlConfig, run_wrap
 from explore3d.explore import rough_bound, wrap_poses
 from explore3d.kinematics import gravity_torques, link_transforms
-from explore3d.localise import INNER_SIDE, KINDS, inverse_dynamics, localise
+from explore3d.localise import INNER_SIDE, INNER_SIDE_ROUNDED, KINDS, inverse_dynamics, localise
 from explore3d.robot import JointCommand, JointReading, RecordingRobot, Robot
 from explore3d.sensing import SensorConfig
 from explore3d.sim import ArmSimulation
@@ -165,11 +165,12 @@ def run(obj_name, mode, sensing, directions, angles, attempts, settle, hold_bias
     return out, time.perf_counter() - t0, world.steps
 
 
-def score_all(moments, **loc_kw):
+def score_all(moments, pos_sigma=0.0, **loc_kw):
     """Localise every stored moment (static and +ID variants) and score it."""
     spec = load_arm("default")
     out = []
     for m in moments:
+        loc_kw["position_sigma_m"] = pos_sigma if m["sensing"] == "default" else 0.0
         for variant, key in ((m["moment"], "static"), (m["moment"] + "+ID", "dyn")):
             r = score_moment(spec, m["T"], m["q"], m[key], m["truth"], m["sigma"], **loc_kw)
             r["hold_bias"] = m.get("hold_bias", 0.0)
@@ -224,8 +225,10 @@ def main():
     ap.add_argument("--hold-bias", type=float, default=0.0, help="ControlConfig.hold_bias, rad")
     ap.add_argument("--moments", help="simulate and store the moments here (.pkl)")
     ap.add_argument("--score", nargs="*", help="score stored moments (.pkl files)")
-    ap.add_argument("--kinds", default="inner-side", choices=["inner-side", "all"])
+    ap.add_argument("--kinds", default="rounded", choices=["inner-side", "rounded", "all"])
     ap.add_argument("--chi2", type=float, default=25.0)
+    ap.add_argument("--pos-sigma", type=float, default=0.0,
+                    help="localise(position_sigma_m=...) for default-sensing moments, metres")
     ap.add_argument("--only", nargs="*", default=[], help="score only moments with these key=value (e.g. settle=30)")
     ap.add_argument("--out", help="scored rows (.json)")
     ap.add_argument("--summarise", nargs="*", help="tables of scored rows (.json files)")
@@ -253,9 +256,9 @@ def main():
     for kv in a.only:
         k, v = kv.split("=")
         moments = [m for m in moments if str(m[k]) == v]
-    kinds = INNER_SIDE if a.kinds == "inner-side" else KINDS
+    kinds = {"inner-side": INNER_SIDE, "rounded": INNER_SIDE_ROUNDED, "all": KINDS}[a.kinds]
     t0 = time.perf_counter()
-    rows = score_all(moments, kinds=kinds, chi2_gain=a.chi2)
+    rows = score_all(moments, kinds=kinds, chi2_gain=a.chi2, pos_sigma=a.pos_sigma)
     wall = time.perf_counter() - t0
     if a.out:
         json.dump({"args": vars(a), "score_s": wall, "rows": rows}, open(a.out, "w"))
