@@ -124,3 +124,16 @@ def test_tip_distal_face():
     c = localise(SPEC, q, tau, None, sigma_nm=1e-7).contacts[0]
     assert c.link == n - 1 and c.kind == "distal"
     assert np.allclose(c.point_link, [SPEC.link_length, 0.001, 0.0], atol=1e-6)
+
+
+def test_flat_contact_is_its_centre_of_pressure():
+    """A link face lying along the object: a distributed normal load is one contact at its centre of pressure."""
+    q, T = _config(8), _base(8)
+    W = SPEC.link_width
+    load = [(10, [x, W / 2, 0.0], [0.0, -w, 0.0]) for x, w in ((0.004, 1.0), (0.010, 2.0), (0.018, 1.0))]
+    loc = localise(SPEC, q, _tau(q, T, load), T, sigma_nm=1e-6)
+    assert len(loc.contacts) == 1
+    c = loc.contacts[0]
+    assert c.link == 10 and c.kind == "inner"
+    assert np.allclose(c.point_link, [0.0105, W / 2, 0.0], atol=1e-6)  # (0.004 + 0.020 + 0.018) / 4
+    assert c.force_n == pytest.approx(4.0, rel=1e-6)
