@@ -25,7 +25,7 @@ import numpy as np
 
 from explore3d import ExploreConfig, load_arm, load_object
 from explore3d.band import cached_band
-from explore3d.encircle import ControlConfig, run_wrap
+from explore3d.encircle import run_wrap
 from explore3d.explore import rough_bound, wrap_poses
 from explore3d.kinematics import gravity_torques, link_transforms
 from explore3d.localise import INNER_SIDE, INNER_SIDE_ROUNDED, KINDS, inverse_dynamics, localise
