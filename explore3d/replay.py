@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .quality import FALSE_DETECTION_TOL_M, TOUCH_TOL_M, _q, detection_records
-from .robot import JointCommand, JointReading, Robot
+from .robot import ForwardingRobot, JointCommand, JointReading, Robot
 from .sdf import SignedDistance
 
 __all__ = ["FalseDetectionDiagnosis", "WrapReplay", "diagnose_false_detections", "replay_wrap"]
@@ -52,27 +52,21 @@ class WrapReplay:
     identical: bool
 
 
-class _ContactObservingRobot(Robot):
+class _ContactObservingRobot(ForwardingRobot):
     """The simulated arm's robot interface, passed through unchanged; after every step it also
     logs the command, the reading, and PyBullet's contacts of each link with the object."""
 
     def __init__(self, world, robot: Robot):
-        self._world, self._robot = world, robot
-        self.spec, self.dt, self.gravity = robot.spec, robot.dt, robot.gravity
+        super().__init__(robot)
+        self._world = world
         self.log: dict = {k: [] for k in ("q_ref", "q", "forces", "torque", "dist", "force", "sweep")}
         self.starts: list = []
         self._full = np.array(robot.spec.joint_torques())
 
-    @property
-    def base_pose(self) -> np.ndarray:
-        return self._robot.base_pose
-
-    def start(self, T_world_base, q0) -> JointReading:
+    def on_start(self, T_world_base, q0, reading: JointReading) -> None:
         self.starts.append(len(self.log["q"]))
-        return self._robot.start(T_world_base, q0)
 
-    def step(self, command: JointCommand) -> JointReading:
-        r = self._robot.step(command)
+    def on_step(self, command: JointCommand, r: JointReading) -> None:
         n = self.spec.n_links
         w = self._world
         d, f = np.full(n, np.inf), np.zeros(n)
@@ -89,7 +83,6 @@ class _ContactObservingRobot(Robot):
         self.log["sweep"].append(bool((lim < self._full).any()))  # settle steps hold with the full torques
         self.log["dist"].append(d)
         self.log["force"].append(f)
-        return r
 
 
 def replay_wrap(exploration, mesh, wrap: int) -> WrapReplay:

@@ -12,7 +12,8 @@ Implementations:
 * :class:`explore3d.sim.SimRobot`: the PyBullet arm seen through :mod:`explore3d.sensing`;
 * :class:`LogRobot`: a recorded :class:`RobotLog` played back (a simulated run, or a real
   robot's log in the same documented format);
-* :class:`RecordingRobot`: wraps any robot and records what passes through the door.
+* :class:`RecordingRobot`: wraps any robot and records what passes through the door (a
+  :class:`ForwardingRobot`, the base of every observer of the traffic).
 
 Frames: ``T_world_base`` (4, 4) maps base coordinates to world coordinates (see
 :mod:`explore3d.arm`).  Angles rad, velocities rad/s, torques N m, times s.
@@ -30,7 +31,8 @@ import numpy as np
 from .arm import ArmSpec
 
 __all__ = [
-    "JointCommand", "JointReading", "Robot", "RobotLog", "RecordingRobot", "LogRobot", "LogMismatchError",
+    "JointCommand", "JointReading", "Robot", "RobotLog", "ForwardingRobot", "RecordingRobot", "LogRobot",
+    "LogMismatchError",
     "LOG_FORMAT_VERSION",
 ]
 
@@ -208,14 +210,13 @@ class RobotLog:
                 raise ValueError(f"robot log: {k} must have shape {shape}; got {got}")
 
 
-class RecordingRobot(Robot):
-    """Wraps a robot and records every motion start, command and reading (:meth:`log`)."""
+class ForwardingRobot(Robot):
+    """Wraps a robot and passes everything through unchanged; subclasses observe the traffic by
+    overriding :meth:`on_start` and :meth:`on_step` (recording, evaluation-only observers)."""
 
     def __init__(self, robot: Robot):
         self._robot = robot
         self.spec, self.dt, self.gravity = robot.spec, robot.dt, robot.gravity
-        self._base, self._start_q, self._start_index = [], [], []
-        self._rows: list = []
 
     @property
     def base_pose(self) -> np.ndarray:
@@ -223,16 +224,37 @@ class RecordingRobot(Robot):
 
     def start(self, T_world_base, q0) -> JointReading:
         r = self._robot.start(T_world_base, q0)
-        self._base.append(np.asarray(T_world_base, dtype=np.float64).copy())
-        self._start_q.append(np.asarray(q0, dtype=np.float64).copy())
-        self._start_index.append(len(self._rows))
-        self._rows.append((make_command(self.spec, q0), r))
+        self.on_start(T_world_base, q0, r)
         return r
 
     def step(self, command: JointCommand) -> JointReading:
         r = self._robot.step(command)
-        self._rows.append((command, r))
+        self.on_step(command, r)
         return r
+
+    def on_start(self, T_world_base, q0, reading: JointReading) -> None:
+        """Called after each motion's start with its base pose (4, 4), rest angles (n,) and reading."""
+
+    def on_step(self, command: JointCommand, reading: JointReading) -> None:
+        """Called after each step with the command sent and the reading returned."""
+
+
+class RecordingRobot(ForwardingRobot):
+    """Wraps a robot and records every motion start, command and reading (:meth:`log`)."""
+
+    def __init__(self, robot: Robot):
+        super().__init__(robot)
+        self._base, self._start_q, self._start_index = [], [], []
+        self._rows: list = []
+
+    def on_start(self, T_world_base, q0, reading: JointReading) -> None:
+        self._base.append(np.asarray(T_world_base, dtype=np.float64).copy())
+        self._start_q.append(np.asarray(q0, dtype=np.float64).copy())
+        self._start_index.append(len(self._rows))
+        self._rows.append((make_command(self.spec, q0), reading))
+
+    def on_step(self, command: JointCommand, reading: JointReading) -> None:
+        self._rows.append((command, reading))
 
     def log(self) -> RobotLog:
         """Everything recorded so far."""

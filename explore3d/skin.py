@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .robot import JointCommand, JointReading, Robot
+from .robot import ForwardingRobot, JointCommand, JointReading, Robot
 
 __all__ = ["LOADED_FORCE_N", "SkinContacts", "ideal_skin", "surface_coverage", "COVERAGE_RADII_M"]
 
@@ -58,27 +58,21 @@ class SkinContacts:
         return len(self.points)
 
 
-class _SkinRobot(Robot):
+class _SkinRobot(ForwardingRobot):
     """The simulated arm's robot interface, passed through; at the wanted steps of each motion it
     reads PyBullet's arm-object contact points (the ideal skin)."""
 
     def __init__(self, world, robot: Robot, wanted: list):
-        self._world, self._robot, self._wanted = world, robot, wanted
-        self.spec, self.dt, self.gravity = robot.spec, robot.dt, robot.gravity
+        super().__init__(robot)
+        self._world, self._wanted = world, wanted
         self._motion, self._k = -1, 0
-        self.rows: list = []  # (attempt, step, is_final, link, point (3,), force)
+        self.rows: list = []  # (attempt, is_final, link, point (3,), force)
 
-    @property
-    def base_pose(self) -> np.ndarray:
-        return self._robot.base_pose
-
-    def start(self, T_world_base, q0) -> JointReading:
+    def on_start(self, T_world_base, q0, reading: JointReading) -> None:
         self._motion += 1
         self._k = 0
-        return self._robot.start(T_world_base, q0)
 
-    def step(self, command: JointCommand) -> JointReading:
-        r = self._robot.step(command)
+    def on_step(self, command: JointCommand, reading: JointReading) -> None:
         self._k += 1
         kind = self._wanted[self._motion].get(self._k) if self._motion < len(self._wanted) else None
         if kind is not None:
@@ -86,7 +80,6 @@ class _SkinRobot(Robot):
             for c in w.client.getContactPoints(bodyA=w.arm, bodyB=w.object):
                 if 0 <= c[3] < self.spec.n_links:
                     self.rows.append((self._motion, kind, c[3], c[5], c[9]))
-        return r
 
 
 def _wanted_steps(attempts, settle_steps: int) -> list:
