@@ -144,7 +144,6 @@ class ArmSimulation:
         self._torques = np.array(spec.joint_torques())
         self._sent = None
         self._axis = np.array([0.0, 0.0, 1.0])
-        self._T_base = np.eye(4)
         self._state = p.saveState()
 
     def robot(self, sensors: SensorConfig = SensorConfig()) -> "SimRobot":
@@ -157,8 +156,7 @@ class ArmSimulation:
         before), put the base at ``T_world_base`` and the joints at rest at ``q0``; hold there.
         Returns the exact (q, dq, tau)."""
         self._p.restoreState(self._state)
-        self._T_base = np.asarray(T_world_base, dtype=np.float64).copy()
-        self._axis = self._T_base[:3, 2].copy()  # every joint axis is the base z axis
+        self._axis = np.asarray(T_world_base, dtype=np.float64)[:3, 2].copy()  # every joint axis is the base z axis
         pos, quat = _pose_from_T(T_world_base)
         self._p.resetBasePositionAndOrientation(self.arm, pos, quat)
         q0 = np.asarray(q0, dtype=np.float64)
