@@ -76,6 +76,17 @@ class ControlConfig:
             over itself).
         settle_steps: steps the arm is held still after being reset straight and after each
             sweep (lets the impact of a contact die out before the next joint moves).
+        contact_settle_steps: after a detected contact the arm is held until it is still (below),
+            at most this many steps (>= ``settle_steps``); the reading then is the attempt's
+            *moment* for that contact (:attr:`Attempt.moments`): a quasi-static reading the
+            contacts are localised from (:mod:`explore3d.localise`).  Equal to ``settle_steps``:
+            a fixed hold, no stillness test.
+        still_speed: the arm is *still* when every joint's reported speed has stayed at or below
+            this, rad/s, for ``still_steps`` consecutive readings (the default is just above one
+            velocity unit of the default sensing, 0.024 rad/s, so a still joint reads 0 or one unit).
+        still_steps: consecutive still readings that end a contact's settle.  Over that window
+            the mean acceleration of every joint is bounded by about ``2 still_speed /
+            (still_steps dt)``, which bounds the chain's unmodelled inertial torques.
         max_sweep_steps: safety cap on the steps of one joint's sweep.
     """
 
@@ -92,6 +103,9 @@ class ControlConfig:
     rereference_held: bool = True
     max_curl: float = 2 * math.pi
     settle_steps: int = 3
+    contact_settle_steps: int = 40
+    still_speed: float = 0.03
+    still_steps: int = 8
     max_sweep_steps: int = 2000
 
     def __post_init__(self):
@@ -105,6 +119,9 @@ class ControlConfig:
                            ("sweep_torque_margin", "N m")):
             check_field(self, name, 0, unit)
         check_field(self, "settle_steps", 0, integer=True)
+        check_field(self, "contact_settle_steps", self.settle_steps, integer=True)
+        check_field(self, "still_speed", 0, "rad/s")
+        check_field(self, "still_steps", 1, integer=True)
         check_field(self, "max_sweep_steps", 1, integer=True)
         for name in ("watch_held", "gravity_compensation", "rereference_held"):
             if not isinstance(getattr(self, name), bool):
@@ -121,8 +138,11 @@ class Attempt:
         q_ref: (n,) references at the end, rad.
         contact: (n,) bool, joint j's sweep ended by a detected contact.
         reasons: StopReason of each joint's sweep.
-        detect_step: (n,) int, the step of the attempt at which joint j's sweep ended.
+        detect_step: (n,) int, the step of the attempt after joint j's sweep and its settle.
         steps: physics steps taken.
+        contact_step: (n,) int, the step at which joint j's contact was detected (-1: none).
+        moments: one :class:`Moment` per detected contact, in order: the settled reading the
+            contacts are localised from.
         trajectory: (t, n) measured joint angles at every step when recorded, else None.
         trajectory_ref: (t, n) references at every step when recorded, else None.
     """
@@ -136,6 +156,27 @@ class Attempt:
     steps: int
     trajectory: np.ndarray | None = None
     trajectory_ref: np.ndarray | None = None
+    contact_step: np.ndarray | None = None
+    moments: tuple = ()
+
+
+@dataclass(frozen=True)
+class Moment:
+    """A quasi-static reading after a detected contact: what the robot knows there.
+
+    Attributes:
+        joint: the joint whose sweep detected the contact.
+        step: the step of the attempt at which it was read (1-based, as ``detect_step``).
+        still: the arm was still by :class:`ControlConfig`'s test (False: the settle ran out).
+        reading: a :class:`~explore3d.robot.JointReading`: the mean of the readings over the
+            settle's last ``still_steps`` steps (angles, velocities, motor torques; see
+            :meth:`Controller.settle`).
+    """
+
+    joint: int
+    step: int
+    still: bool
+    reading: JointReading
 
 
 def sweep_speeds(spec: ArmSpec, cfg: ControlConfig) -> np.ndarray:
@@ -209,6 +250,31 @@ class Controller:
             q = self.send(q_ref)
         return q
 
+    def settle(self, q_ref) -> tuple[bool, JointReading]:
+        """Hold ``q_ref`` at least ``settle_steps`` and at most ``contact_settle_steps`` steps,
+        until the arm is still (see :class:`ControlConfig`).
+
+        Returns:
+            whether it was still, and the mean of the last ``still_steps`` readings (angles,
+            velocities and motor torques; the last reading's time).  Held still, the arm's
+            position loops still trade small corrective impulses from step to step (measured:
+            0.2 N m on a free distal joint at single steps, none on the mean), which a single
+            reading would take for contact torques; over the window the inertial torques
+            average to the change of momentum over its length.
+        """
+        cfg = self.cfg
+        run = 0
+        window: list = []
+        for i in range(cfg.contact_settle_steps):
+            self.send(q_ref)
+            window = (window + [self.reading])[-cfg.still_steps:]
+            run = run + 1 if float(np.max(np.abs(self.reading.dq))) <= cfg.still_speed else 0
+            if i + 1 >= cfg.settle_steps and (run >= cfg.still_steps or cfg.contact_settle_steps == cfg.settle_steps):
+                break
+        if not window:
+            return False, self.reading
+        return run >= cfg.still_steps, self.reading
+
 
 def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: ContactBand | None,
                 speed: float, torque_limit: float, is_base_stop: bool = False, observer=None) -> StopReason:
@@ -273,6 +339,8 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
     contact = np.zeros(n, dtype=bool)
     reasons: list = []
     detect_step = np.zeros(n, dtype=int)
+    contact_step = np.full(n, -1, dtype=int)
+    moments: list = []
     for k in range(n):
         if k > 0 and q[:k].sum() >= cfg.max_curl:
             reasons.extend([StopReason.WRAPPED] * (n - k))
@@ -284,16 +352,22 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
         q = ctl.reading.q
         if reason is StopReason.CONTACT:
             contact[k] = True
+            contact_step[k] = ctl.steps
             q_ref[k] = q[k] + cfg.hold_bias
             if cfg.rereference_held:
                 q_ref[:k] = q[:k] + cfg.hold_bias * contact[:k]
-        q = ctl.hold(q_ref)
+            still, reading = ctl.settle(q_ref)
+            moments.append(Moment(joint=k, step=ctl.steps, still=still, reading=reading))
+            q = ctl.reading.q
+        else:
+            q = ctl.hold(q_ref)
         reasons.append(reason)
         detect_step[k] = ctl.steps
     return Attempt(
         T_world_base=np.asarray(T_world_base, dtype=float).copy(), q=q.copy(), q_ref=q_ref.copy(), contact=contact,
         reasons=tuple(reasons), detect_step=detect_step, steps=ctl.steps,
         trajectory=np.array(ctl.traj) if record else None, trajectory_ref=np.array(ctl.traj_ref) if record else None,
+        contact_step=contact_step, moments=tuple(moments),
     )
 
 

@@ -19,6 +19,7 @@ from ._validate import check_field
 from .arm import ArmSpec, load_arm
 from .directions import WrapPose, planar_wrap_poses, spatial_wrap_poses
 from .band import cached_band
+from .contacts import ContactSet, contacts_for_hull, localise_attempts
 from .detect import ContactBand
 from .encircle import Attempt, ControlConfig, run_wrap
 from .kinematics import link_surface_points
@@ -65,6 +66,11 @@ class ExploreConfig:
         record: keep every sweep step's joint readings and references in the attempts, and
             each wrap's :class:`~explore3d.robot.RobotLog` (everything through the robot
             interface) in :attr:`Exploration.logs`.
+        points: what :attr:`Exploration.points` holds: ``"contacts"`` (default), the contacts
+            localised from each detection's settled reading (:mod:`explore3d.contacts`; their
+            mid-height points), or ``"links"``, the paper's rule: the faces of the
+            contact-flagged links at the attempt's final configuration (``n_along``,
+            ``n_height``, ``faces``, ``face_offset`` apply to these only).
     """
 
     mode: str = "3d"
@@ -84,10 +90,14 @@ class ExploreConfig:
     sensors: SensorConfig = field(default_factory=SensorConfig)
     jobs: int | None = 1
     record: bool = False
+    points: str = "contacts"
 
     def __post_init__(self):
         if self.mode not in ("planar", "3d"):
             raise ValueError(f"mode must be 'planar' or '3d'; got {self.mode!r}")
+        if self.points not in ("contacts", "links"):
+            raise ValueError(f"ExploreConfig.points must be 'contacts' (localised from the joint torques) or 'links' "
+                             f"(the paper's link faces); got {self.points!r}")
         if self.directions is None:
             object.__setattr__(self, "directions", 3 if self.mode == "planar" else 48)
         for name in ("directions", "offsets", "angles", "attempts", "n_along", "n_height"):
@@ -137,6 +147,8 @@ class Exploration:
         band_s: wall-clock time spent getting the contact band, s (calibrating it the first time
             for a setting, else reading the cache).
         logs: per wrap, its :class:`~explore3d.robot.RobotLog` when ``config.record``, else None.
+        contacts: the contacts localised from the settled readings
+            (:class:`~explore3d.contacts.ContactSet`), whatever ``config.points``.
     """
 
     spec: ArmSpec
@@ -153,6 +165,7 @@ class Exploration:
     wall_s: float
     band_s: float = 0.0
     logs: tuple | None = None
+    contacts: ContactSet | None = None
 
     @property
     def n_wraps(self) -> int:
@@ -181,6 +194,19 @@ def wrap_poses(spec: ArmSpec, config: ExploreConfig, centre, radius: float) -> l
                               clearance=config.clearance)
 
 
+def wrap_planes(poses) -> np.ndarray:
+    """(n_wraps,) int: the same id for wraps in the same plane (their base z axes parallel, up
+    to sign, and their base origins at the same offset along it, to 1e-6 m)."""
+    keys, out = {}, []
+    for p in poses:
+        T = np.asarray(p.T_world_base, dtype=float)
+        z = T[:3, 2]
+        z = -z if (z[np.argmax(np.abs(z))] < 0) else z
+        key = tuple(np.round(np.r_[z, z @ T[:3, 3]], 6))
+        out.append(keys.setdefault(key, len(keys)))
+    return np.array(out, dtype=int)
+
+
 # --- worker side -------------------------------------------------------------------------------
 _WORKER: dict = {}
 
@@ -196,13 +222,18 @@ def _run_one(args):
     about a second per wrap.  The controller gets the robot interface only; the sensor noise is
     seeded by the wrap's index."""
     index, T, band, config = args
+    spec = _WORKER["world_args"][0]
     with ArmSimulation(*_WORKER["world_args"]) as world:
         robot = world.robot(config.sensors)
         robot.reseed((0, index))
         rec = RecordingRobot(robot) if config.record else robot
         atts = run_wrap(rec, T, band, attempts=config.attempts, base_step=config.base_step, cfg=config.control,
                         record=config.record)
-        return atts, world.steps, (rec.log() if config.record else None)
+        gravity = robot.gravity
+        steps, log = world.steps, (rec.log() if config.record else None)
+    # the contacts from the settled readings alone (the robot's own data, its model and gravity)
+    contacts = localise_attempts(spec, atts, gravity, config.sensors, wrap=index)
+    return atts, steps, log, contacts
 
 
 def attempt_points(spec: ArmSpec, attempt: Attempt, config: ExploreConfig) -> np.ndarray:
@@ -284,10 +315,17 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
                     progress(i + 1, len(tasks))
     attempts = tuple(tuple(r[0]) for r in results)
     steps = int(sum(r[1] for r in results))
-    points, pw, pa, pl = contact_points(spec, attempts, config)
+    contacts = ContactSet.concatenate(r[3] for r in results)
+    if config.points == "contacts":
+        contacts = contacts_for_hull(contacts, config, centre, radius, plane=wrap_planes(poses))
+        used = contacts.select(contacts.used)
+        d = 2 if config.mode == "planar" else 3
+        points, pw, pa, pl = used.points[:, :d], used.wrap, used.attempt, used.link
+    else:
+        points, pw, pa, pl = contact_points(spec, attempts, config)
     return Exploration(
         spec=spec, config=config, poses=tuple(poses), attempts=attempts, points=points,
         point_wrap=pw, point_attempt=pa, point_link=pl,
         band=band, steps=steps, sim_time_s=steps * config.sim.timestep, wall_s=time.perf_counter() - t0, band_s=band_s,
-        logs=tuple(r[2] for r in results) if config.record else None,
+        logs=tuple(r[2] for r in results) if config.record else None, contacts=contacts,
     )

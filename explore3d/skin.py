@@ -4,7 +4,8 @@
 EVALUATION ONLY: it re-runs a recorded exploration's wraps in a fresh simulation of the true mesh
 and reads PyBullet's contact points, which the robot never sees.  Wraps are deterministic (sensor
 noise seeded by the wrap's index), so the re-run takes exactly the recorded motions; at each
-*reading* of the exploration (every detection step, and each attempt's final hold) it keeps every
+*reading* of the exploration (every detection step, every settled moment a contact is localised
+from, and each attempt's final hold) it keeps every
 arm-object contact point PyBullet reports, on the link side (``positionOnA``), with its normal
 force.  Hulled the same way as the link points (:func:`explore3d.pipeline.reconstruct_points`),
 they separate where the arm touched (the skin) from what the joint signals made of it.
@@ -39,7 +40,10 @@ class SkinContacts:
         points: (m, 3) contact points on the links' surfaces, world frame, metres.
         normal_force_n: (m,) PyBullet's normal force of each point, N.
         link, wrap, attempt: (m,) int: where each point came from.
-        final: (m,) bool: read at an attempt's final hold (False: at a detection step).
+        kind: (m,) str: when it was read: ``"detect"`` (a detection step), ``"moment"`` (the
+            physics state a settled reading reports, :attr:`explore3d.encircle.Attempt.moments`;
+            ``moment`` gives its index in the attempt) or ``"final"`` (an attempt's final hold).
+        moment: (m,) int: the index of the moment in its attempt (-1 for other kinds).
     """
 
     points: np.ndarray
@@ -47,7 +51,13 @@ class SkinContacts:
     link: np.ndarray
     wrap: np.ndarray
     attempt: np.ndarray
-    final: np.ndarray
+    kind: np.ndarray
+    moment: np.ndarray
+
+    @property
+    def final(self) -> np.ndarray:
+        """(m,) bool: read at an attempt's final hold."""
+        return self.kind == "final"
 
     @property
     def loaded(self) -> np.ndarray:
@@ -66,7 +76,7 @@ class _SkinRobot(ForwardingRobot):
         super().__init__(robot)
         self._world, self._wanted = world, wanted
         self._motion, self._k = -1, 0
-        self.rows: list = []  # (attempt, is_final, link, point (3,), force)
+        self.rows: list = []  # (attempt, kind, moment index, link, point (3,), force)
 
     def on_start(self, T_world_base, q0, reading: JointReading) -> None:
         self._motion += 1
@@ -74,20 +84,25 @@ class _SkinRobot(ForwardingRobot):
 
     def on_step(self, command: JointCommand, reading: JointReading) -> None:
         self._k += 1
-        kind = self._wanted[self._motion].get(self._k) if self._motion < len(self._wanted) else None
-        if kind is not None:
+        kinds = self._wanted[self._motion].get(self._k, ()) if self._motion < len(self._wanted) else ()
+        if kinds:
             w = self._world
-            for c in w.client.getContactPoints(bodyA=w.arm, bodyB=w.object):
-                if 0 <= c[3] < self.spec.n_links:
-                    self.rows.append((self._motion, kind, c[3], c[5], c[9]))
+            cps = [c for c in w.client.getContactPoints(bodyA=w.arm, bodyB=w.object) if 0 <= c[3] < self.spec.n_links]
+            for kind, mi in kinds:
+                for c in cps:
+                    self.rows.append((self._motion, kind, mi, c[3], c[5], c[9]))
 
 
-def _wanted_steps(attempts, settle_steps: int) -> list:
-    """Per attempt, {step within the motion (1-based): True at the final hold, False at a detection}."""
+def _wanted_steps(attempts, delay_steps: int) -> list:
+    """Per attempt, {physics step within the motion (1-based): [(kind, moment index), ...]}."""
     out = []
     for att in attempts:
-        d = {int(att.detect_step[k]) - settle_steps: False for k in np.flatnonzero(att.contact)}
-        d[int(att.steps)] = True
+        d: dict = {}
+        for k in np.flatnonzero(att.contact):
+            d.setdefault(int(att.contact_step[k]), []).append(("detect", -1))
+        for mi, m in enumerate(att.moments):  # the reading at step s reports the state of step s - delay
+            d.setdefault(max(int(m.step) - delay_steps, 1), []).append(("moment", mi))
+        d.setdefault(int(att.steps), []).append(("final", -1))
         out.append(d)
     return out
 
@@ -100,29 +115,30 @@ def ideal_skin(exploration, mesh) -> SkinContacts:
     from .sim import ArmSimulation
 
     cfg = exploration.config
-    rows = {k: [] for k in ("p", "f", "l", "w", "a", "fin")}
+    rows = {k: [] for k in ("p", "f", "l", "w", "a", "kind", "mi")}
     V, F = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
     for wi, (pose, atts) in enumerate(zip(exploration.poses, exploration.attempts)):
         with ArmSimulation(exploration.spec, V, F, cfg.sim) as world:  # a world per wrap, as explore()
             robot = world.robot(cfg.sensors)
             robot.reseed((0, wi))  # as explore() seeds the wrap
-            skin = _SkinRobot(world, robot, _wanted_steps(atts, cfg.control.settle_steps))
+            skin = _SkinRobot(world, robot, _wanted_steps(atts, cfg.sensors.delay_steps))
             again = run_wrap(skin, pose.T_world_base, exploration.band, attempts=cfg.attempts,
                              base_step=cfg.base_step, cfg=cfg.control)
         if len(again) != len(atts) or not all(np.array_equal(a.q, b.q) for a, b in zip(again, atts)):
             raise RuntimeError(f"wrap {wi}: the re-run did not reproduce the recorded attempts; the ideal "
                                "skin needs the exploration's own mesh, arm and configuration")
-        for ai, fin, link, p, f in skin.rows:
+        for ai, kind, mi, link, p, f in skin.rows:
             rows["p"].append(p)
             rows["f"].append(f)
             rows["l"].append(link)
             rows["w"].append(wi)
             rows["a"].append(ai)
-            rows["fin"].append(fin)
+            rows["kind"].append(kind)
+            rows["mi"].append(mi)
     return SkinContacts(points=np.array(rows["p"], dtype=float).reshape(-1, 3),
                         normal_force_n=np.array(rows["f"], dtype=float), link=np.array(rows["l"], dtype=int),
                         wrap=np.array(rows["w"], dtype=int), attempt=np.array(rows["a"], dtype=int),
-                        final=np.array(rows["fin"], dtype=bool))
+                        kind=np.array(rows["kind"], dtype="<U6"), moment=np.array(rows["mi"], dtype=int))
 
 
 def surface_coverage(truth, touches, radii_m=COVERAGE_RADII_M, n_samples: int = 20000, seed: int = 0) -> tuple:
