@@ -171,7 +171,7 @@ def calibrate_thickness(arm="default", config=None, calibration_object=None, rej
     if label is None:
         lo, hi = calibration_object.bounds
         label = f"mesh {np.round((hi - lo) * 1000, 1).tolist()} mm at {np.round((lo + hi) / 2 * 1000, 1).tolist()} mm"
-    cfg = dataclasses.replace(config, face_offset=0.0, record=False)
+    cfg = dataclasses.replace(config, face_offset=0.0, record=False, points="links")  # the thickness of link faces
     ex = explore(calibration_object, arm, cfg, progress=progress)
     gaps, _, _ = contact_point_gaps(ex, SignedDistance(calibration_object), unique=True)
     gaps = gaps[np.isfinite(gaps)]  # contact links that gave no points

@@ -175,6 +175,8 @@ RUN_OPTIONS = {
     # what the robot feels, and the simulator's contact margin
     "sensing": _choice("sensing", ("default", "ideal")),
     "collision_margin": _nonnegative("--collision-margin"),
+    # what the hull is built from: contacts localised from the joint torques, or the paper's link faces
+    "points": _choice("points", ("contacts", "links")),
     # outputs
     "density": _positive("--density"),
     "height": _positive("--height"),
@@ -183,7 +185,7 @@ _BOOL_OPTIONS = ("mirrored", "no_pictures", "calibrate", "quality", "no_quality"
 RUN_DEFAULTS = {"object": "cube", "arm": "default", "mode": "3d", "a": DEFAULT_A, "method": "exponential", "seed": 0,
                 "format": "obj", "density": DEFAULT_DENSITY_KG_M3}
 _EXPLORE_KEYS = ("mode", "directions", "attempts", "jobs", "offsets", "angles", "mirrored", "base_step",
-                 "clearance", "n_along", "n_height", "face_offset")
+                 "clearance", "n_along", "n_height", "face_offset", "points")
 
 
 def _check_bool(v, name):
@@ -278,6 +280,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "one step of delay) or ideal (exact, no delay)")
     r.add_argument("--collision-margin", dest="collision_margin", type=RUN_OPTIONS["collision_margin"],
                    help="the simulator's contact margin on the object and the links, metres (default 0.0003)")
+    r.add_argument("--points", type=RUN_OPTIONS["points"],
+                   help="what the hull is built from: contacts (default: localised from the joint torques, "
+                        "points.ply with their normals and uncertainty) or links (the paper's rule: the faces of "
+                        "the links whose sweep detected a contact)")
     r.add_argument("--density", type=RUN_OPTIONS["density"],
                    help=f"density of the estimate body in estimate.urdf, kg/m^3 (default {DEFAULT_DENSITY_KG_M3:g})")
     r.add_argument("--height", type=RUN_OPTIONS["height"],
@@ -319,10 +325,13 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--json", action="store_true", help="print JSON only")
     e.set_defaults(func=cmd_evaluate)
 
-    k = sub.add_parser("compare", help="the paper's link points against an ideal skin on the same sweeps",
+    k = sub.add_parser("compare", help="link points, localised contacts and an ideal skin on the same sweeps",
                        description="Explore OBJECT once; print the error, IoU, Chamfer distance and surface coverage "
-                                   "(within 3 and 6 mm of a point) of the pipeline's link points and of an ideal skin "
-                                   "(every contact point PyBullet reports at the same readings; evaluation only).")
+                                   "(within 3 and 6 mm of a point) of the paper's link points, of the contacts "
+                                   "localised from the joint torques (the pipeline's default) and of an ideal skin "
+                                   "(every contact point PyBullet reports at the same readings; evaluation only), "
+                                   "and the localisation against the skin (in-plane and 3D distance, precision and "
+                                   "recall within 3 mm).")
     k.add_argument("object", help="built-in name, mesh path or pybullet_data:NAME")
     k.add_argument("--arm", default="default", help="built-in arm or a URDF written by 'explore3d arm'")
     k.add_argument("--mode", type=RUN_OPTIONS["mode"], help="3d (default) or planar")
@@ -452,6 +461,9 @@ def cmd_run(args) -> int:
     config = explore_config(opts)
     if opts.get("calibrate") and "face_offset" in opts:
         raise UsageError("--calibrate and --face-offset exclude each other: pass one")
+    if (opts.get("calibrate") or opts.get("face_offset")) and config.points != "links":
+        raise UsageError("--calibrate and --face-offset correct the paper's link points; the localised contacts (the "
+                         "default) lie on the links' surfaces already: add --points links, or drop them")
 
     from ._quiet import STDERR, quiet_c_output
 
@@ -643,7 +655,8 @@ def cmd_compare(args) -> int:
         print(json.dumps(report, indent=2))
         return 0
     print(f"{args.object}: {report['n_wraps']} wraps ({config.mode}), {report['n_contacts']} detections, "
-          f"{report['skin_contacts']} skin contacts ({report['skin_loaded']} carrying force)")
+          f"{report['localisation']['n_localised']} localised contacts ({report['localisation_used']['n_localised']} "
+          f"hulled), {report['skin_contacts']} skin contacts ({report['skin_loaded']} carrying force)")
     print(format_compare(report))
     return 0
 

@@ -1,10 +1,12 @@
-"""Side by side on the same sweeps: the paper's link points against an ideal skin (evaluation only).
+"""Side by side on the same sweeps: the paper's link points, our localised contacts and an ideal
+skin (evaluation only).
 
-:func:`compare` runs one exploration, reconstructs it as the pipeline does (the paper's rule: the
-faces of the contact-flagged links), and re-runs its sweeps with the ideal skin of
-:mod:`explore3d.skin` (every contact point PyBullet reports at the same readings, hulled the same
-way).  The gap between the columns is what the joint signals lose about *where* the arm touched;
-what the skin misses too is what the sweeps never touched.
+:func:`compare` runs one exploration, reconstructs it three ways -- the paper's rule (the faces of
+the contact-flagged links), the contacts localised from the joint torques (the pipeline's
+default), and the ideal skin of :mod:`explore3d.skin` (every contact point PyBullet reports at the
+same readings, hulled the same way) -- and scores the localisation against the skin.  The gap
+between the columns is what the joint signals lose about *where* the arm touched; what the skin
+misses too is what the sweeps never touched.
 """
 from __future__ import annotations
 
@@ -60,38 +62,128 @@ def _column(name, points, wrap, res, seed) -> CompareColumn:
     return CompareColumn(name, e, iou, ch, c3, c6, int(len(P)))
 
 
-def compare(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float = DEFAULT_A, *, centre=None,
-            radius=None, seed: int = 0, progress=None) -> dict:
-    """Explore ``mesh`` once and score three point sets of the same sweeps: the link points of
-    the contact-flagged links (the pipeline's estimate), the ideal skin's contact points, and the
-    ideal skin's points that carry force.
+def localisation_scores(exploration, skin, radius_m: float = 3.0e-3, used_only: bool = False) -> dict:
+    """How well the localised contacts match the ideal skin at the same readings (evaluation only).
+
+    For each settled reading (:attr:`explore3d.encircle.Attempt.moments`) the truth is every
+    arm-object contact point PyBullet reports in the physics state that reading reports
+    (:func:`explore3d.skin.ideal_skin`, kind ``"moment"``).  A localised contact is *correct* when
+    a true point on the same link lies within ``radius_m`` of it in the wrap plane (the base x-y
+    plane; the height across the link is unobservable and reported as an interval).
 
     Returns:
-        a JSON-ready dict: ``columns`` (list of :class:`CompareColumn` dicts), ``n_wraps``,
+        a JSON-ready dict: ``n_localised``; ``inplane_median_m``, ``inplane_p90_m`` and
+        ``3d_median_m``, ``3d_p90_m`` (distance to the nearest true point on the same link; to
+        the nearest on any link when the link has none: ``n_without_same_link``);
+        ``precision`` (correct / localised); ``recall_all`` (true contact links with a correct
+        localised contact on them / true contact links, over all readings) and ``recall_loaded``
+        (the same for links carrying at least :data:`explore3d.skin.LOADED_FORCE_N` in total) and
+        ``recall_1n`` (links carrying at least 1 N: a force the default sensing resolves to 1 mm,
+        :func:`explore3d.contacts.contact_uncertainty_m`), with their counts ``n_true_links``,
+        ``n_true_loaded`` and ``n_true_1n``.
+    """
+    from .skin import LOADED_FORCE_N
+
+    ex = exploration
+    cs = ex.contacts.select(ex.contacts.used) if used_only else ex.contacts
+    truth = {}  # (wrap, attempt, moment index) -> rows of the skin
+    sel = np.flatnonzero(skin.kind == "moment")
+    for i in sel:
+        truth.setdefault((int(skin.wrap[i]), int(skin.attempt[i]), int(skin.moment[i])), []).append(i)
+    d_in, d_3d, correct, no_same = [], [], [], 0
+    found = set()  # (wrap, attempt, moment, link) localised correctly
+    for j in range(len(cs)):
+        w, a_, link = int(cs.wrap[j]), int(cs.attempt[j]), int(cs.link[j])
+        att = ex.attempts[w][a_]
+        mi = [m.joint for m in att.moments].index(int(cs.joint[j]))
+        rows = np.array(truth.get((w, a_, mi), []), dtype=int)
+        if len(rows) == 0:
+            d_in.append(np.inf)
+            d_3d.append(np.inf)
+            correct.append(False)
+            continue
+        z = np.asarray(att.T_world_base, float)[:3, 2]
+        same = rows[skin.link[rows] == link]
+        cand = same if len(same) else rows
+        no_same += int(len(same) == 0)
+        D = skin.points[cand] - cs.points[j]
+        inplane = np.linalg.norm(D - np.outer(D @ z, z), axis=1)
+        d_in.append(float(inplane.min()))
+        d_3d.append(float(np.linalg.norm(D, axis=1).min()))
+        ok = len(same) > 0 and d_in[-1] <= radius_m
+        correct.append(ok)
+        if ok:
+            found.add((w, a_, mi, link))
+    true_links, loaded_links, links_1n = set(), set(), set()
+    for key, rows in truth.items():
+        force: dict = {}
+        for i in rows:
+            force[int(skin.link[i])] = force.get(int(skin.link[i]), 0.0) + float(skin.normal_force_n[i])
+        for link, f in force.items():
+            true_links.add(key + (link,))
+            if f >= LOADED_FORCE_N:
+                loaded_links.add(key + (link,))
+            if f >= 1.0:
+                links_1n.add(key + (link,))
+    fin = np.array([d for d in d_in if np.isfinite(d)])
+    fin3 = np.array([d for d in d_3d if np.isfinite(d)])
+
+    def pct(v, q):
+        return float(np.percentile(v, q)) if len(v) else float("nan")
+
+    return {"n_localised": int(len(cs)), "used_only": used_only,
+            "inplane_median_m": pct(fin, 50), "inplane_p90_m": pct(fin, 90),
+            "3d_median_m": pct(fin3, 50), "3d_p90_m": pct(fin3, 90), "n_without_same_link": int(no_same),
+            "precision": float(np.mean(correct)) if correct else float("nan"),
+            "recall_all": len(found & true_links) / len(true_links) if true_links else float("nan"),
+            "recall_loaded": len(found & loaded_links) / len(loaded_links) if loaded_links else float("nan"),
+            "recall_1n": len(found & links_1n) / len(links_1n) if links_1n else float("nan"),
+            "n_true_links": len(true_links), "n_true_loaded": len(loaded_links), "n_true_1n": len(links_1n),
+            "radius_m": radius_m}
+
+
+def compare(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float = DEFAULT_A, *, centre=None,
+            radius=None, seed: int = 0, progress=None) -> dict:
+    """Explore ``mesh`` once and score four point sets of the same sweeps: the paper's link
+    points (the faces of the contact-flagged links), our contacts localised from the joint
+    torques (the pipeline's default), the ideal skin's contact points, and the ideal skin's
+    points that carry force; and the localisation against the skin (:func:`localisation_scores`).
+
+    Returns:
+        a JSON-ready dict: ``columns`` (list of :class:`CompareColumn` dicts), ``localisation``
+        (all localised contacts) and ``localisation_used`` (those hulled), ``n_wraps``,
         ``n_contacts`` (detections), ``skin_contacts`` and ``skin_loaded`` (skin points),
         ``explore_s`` and ``skin_s`` (wall-clock seconds).
     """
+    import dataclasses
     import time
 
+    from .explore import contact_points
     from .pipeline import run
     from .skin import ideal_skin
 
+    config = dataclasses.replace(config, points="contacts")
     res = run(mesh, arm, config, a=a, centre=centre, radius=radius, seed=seed, progress=progress)
     ex = res.exploration
     t0 = time.perf_counter()
     skin = ideal_skin(ex, mesh)
     skin_s = time.perf_counter() - t0
-    cols = [_column("link points (paper)", ex.points, ex.point_wrap, res, seed),
+    link_cfg = dataclasses.replace(config, points="links")
+    L, Lw, _, _ = contact_points(ex.spec, ex.attempts, link_cfg)
+    cols = [_column("link points (paper)", L, Lw, res, seed),
+            _column("localised contacts", ex.points, ex.point_wrap, res, seed),
             _column("ideal skin, all contacts", skin.points, skin.wrap, res, seed),
             _column("ideal skin, loaded contacts", skin.points[skin.loaded], skin.wrap[skin.loaded], res, seed)]
-    # the pipeline's own score is the first column's (same points, same hull)
+    # the pipeline's own score is the second column's (same points, same hull)
     return {"mode": config.mode, "n_wraps": ex.n_wraps, "n_contacts": ex.n_contacts, "skin_contacts": len(skin),
             "skin_loaded": int(skin.loaded.sum()), "explore_s": float(ex.wall_s), "skin_s": float(skin_s),
-            "columns": [c.to_dict() for c in cols]}
+            "columns": [c.to_dict() for c in cols],
+            "localisation": localisation_scores(ex, skin),
+            "localisation_used": localisation_scores(ex, skin, used_only=True)}
 
 
 def format_compare(report: dict) -> str:
-    """The columns of :func:`compare` as a Markdown table."""
+    """The columns of :func:`compare` as a Markdown table, then the localisation figures."""
     cols = report["columns"]
     rows = [("volume error" if report["mode"] == "3d" else "area error", "percent_error", "{:.2f}%"),
             ("IoU", "iou", "{:.3f}"), ("Chamfer", "chamfer_m", lambda v: f"{1000 * v:.2f} mm"),
@@ -101,4 +193,16 @@ def format_compare(report: dict) -> str:
     for label, key, fmt in rows:
         f = fmt.format if isinstance(fmt, str) else fmt
         out.append(f"| {label} | " + " | ".join(f(c[key]) for c in cols) + " |")
+    if "localisation" in report:
+        out += ["", "| localisation vs ideal skin | all localised | hulled |", "|---|---|---|"]
+        A, U = report["localisation"], report["localisation_used"]
+        mm = lambda v: f"{1000 * v:.2f} mm"  # noqa: E731
+        pc = lambda v: f"{100 * v:.1f}%"  # noqa: E731
+        for label, key, f in (("contacts", "n_localised", str), ("in-plane median", "inplane_median_m", mm),
+                              ("in-plane p90", "inplane_p90_m", mm), ("3D median", "3d_median_m", mm),
+                              ("3D p90", "3d_p90_m", mm), ("precision (3 mm, in plane)", "precision", pc),
+                              ("recall, all true contact links", "recall_all", pc),
+                              ("recall, links carrying >= 1 mN", "recall_loaded", pc),
+                              ("recall, links carrying >= 1 N", "recall_1n", pc)):
+            out.append(f"| {label} | {f(A[key])} | {f(U[key])} |")
     return "\n".join(out)

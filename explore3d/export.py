@@ -22,6 +22,23 @@ URDF_MESH_FORMATS = ("obj", "stl")
 #: PLY vertex properties written by :func:`write_points_ply` besides x, y, z.
 POINT_PROPERTIES = ("wrap", "attempt", "link")
 
+#: Float vertex properties of localised contacts (:func:`contact_properties`), SI units: the
+#: contact normal (unit, world frame, pointing into the link), the force (N), the position
+#: uncertainty along the link (m), the face segment across the link's height the contact lies on
+#: (its two ends, world frame, m) and the interval along the link (x in the link frame, m).
+CONTACT_PROPERTIES = ("nx", "ny", "nz", "force_n", "uncertainty_m", "seg0_x", "seg0_y", "seg0_z",
+                      "seg1_x", "seg1_y", "seg1_z", "along_lo_m", "along_hi_m")
+
+
+def contact_properties(contacts) -> dict:
+    """The :data:`CONTACT_PROPERTIES` of a :class:`~explore3d.contacts.ContactSet`, (m,) each."""
+    c = contacts
+    cols = [c.normals[:, 0], c.normals[:, 1], c.normals[:, 2], c.force_n, c.uncertainty_m,
+            c.segments[:, 0, 0], c.segments[:, 0, 1], c.segments[:, 0, 2],
+            c.segments[:, 1, 0], c.segments[:, 1, 1], c.segments[:, 1, 2],
+            c.along_interval_m[:, 0], c.along_interval_m[:, 1]]
+    return dict(zip(CONTACT_PROPERTIES, (np.asarray(v, dtype=float) for v in cols)))
+
 
 def check_format(fmt) -> str:
     """Lower-cased ``fmt`` if it is one of :data:`MESH_FORMATS`, else ValueError naming them."""
@@ -124,15 +141,17 @@ def write_estimate_urdf(mesh_filename, path, mesh, density: float = DEFAULT_DENS
     return atomic_write_text(path, estimate_urdf(fn.as_posix(), mass, com, inertia))
 
 
-def write_points_ply(points, path, wrap=None, attempt=None, link=None, binary: bool = True) -> Path:
-    """Write link surface points as a PLY point cloud (atomic).
+def write_points_ply(points, path, wrap=None, attempt=None, link=None, binary: bool = True,
+                     extra: dict | None = None) -> Path:
+    """Write the hull's input points as a PLY point cloud (atomic).
 
     Args:
         points: (m, 2) or (m, 3) float, metres; 2D points get z = 0.
         wrap, attempt, link: (m,) int each (default zeros): which wrap, attempt and link gave each point.
         binary: binary little-endian (default) or ASCII PLY.
+        extra: more float vertex properties, name -> (m,) (e.g. :func:`contact_properties`).
 
-    The vertex element has float x, y, z and int wrap, attempt, link.
+    The vertex element has float x, y, z, int wrap, attempt, link, then the ``extra`` floats.
     """
     P = np.asarray(points, dtype=float)
     if P.ndim != 2 or P.shape[1] not in (2, 3):
@@ -148,19 +167,31 @@ def write_points_ply(points, path, wrap=None, attempt=None, link=None, binary: b
         if a.shape != (m,):
             raise ValueError(f"{name} must have shape ({m},) like the points; got {a.shape}")
         cols[name] = a.astype(np.int32)
-    dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4")] + [(n, "<i4") for n in POINT_PROPERTIES])
+    extra = {} if extra is None else dict(extra)
+    for name, v in extra.items():
+        a = np.asarray(v, dtype=float)
+        if a.shape != (m,) or name in ("x", "y", "z", *POINT_PROPERTIES) or not str(name).isidentifier():
+            raise ValueError(f"extra property {name!r} must be a new identifier with shape ({m},) like the points; "
+                             f"got shape {a.shape}")
+        extra[name] = a
+    dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4")] + [(n, "<i4") for n in POINT_PROPERTIES]
+                     + [(n, "<f8") for n in extra])
     rec = np.empty(m, dtype=dtype)
     rec["x"], rec["y"], rec["z"] = P[:, 0], P[:, 1], P[:, 2]
     for n in POINT_PROPERTIES:
         rec[n] = cols[n]
+    for n, v in extra.items():
+        rec[n] = v
     fmt = "binary_little_endian" if binary else "ascii"
-    header = (f"ply\nformat {fmt} 1.0\ncomment explore3d link surface points, metres, world frame\n"
+    header = (f"ply\nformat {fmt} 1.0\ncomment explore3d hull input points, metres, world frame\n"
               f"element vertex {m}\nproperty float x\nproperty float y\nproperty float z\n"
-              + "".join(f"property int {n}\n" for n in POINT_PROPERTIES) + "end_header\n")
+              + "".join(f"property int {n}\n" for n in POINT_PROPERTIES)
+              + "".join(f"property double {n}\n" for n in extra) + "end_header\n")
     if binary:
         body = rec.tobytes()
     else:
-        lines = [f"{r['x']:.9g} {r['y']:.9g} {r['z']:.9g} {r['wrap']} {r['attempt']} {r['link']}" for r in rec]
+        lines = [" ".join([f"{r['x']:.9g} {r['y']:.9g} {r['z']:.9g} {r['wrap']} {r['attempt']} {r['link']}"]
+                          + [f"{r[n]:.17g}" for n in extra]) for r in rec]
         body = ("\n".join(lines) + ("\n" if lines else "")).encode("ascii")
     return atomic_write_bytes(path, header.encode("ascii") + body)
 
@@ -168,8 +199,9 @@ def write_points_ply(points, path, wrap=None, attempt=None, link=None, binary: b
 def read_points_ply(path, with_properties: bool = False):
     """Read a point file (PLY, or any point/mesh file trimesh loads, or a text XYZ file).
 
-    Returns (n, 3) float64 metres; with ``with_properties`` also a dict of the (n,) int vertex
-    properties found among :data:`POINT_PROPERTIES` (PLY only; else empty).
+    Returns (n, 3) float64 metres; with ``with_properties`` also a dict of the (n,) vertex
+    properties found among :data:`POINT_PROPERTIES` (int) and :data:`CONTACT_PROPERTIES` (float)
+    (PLY only; else empty).
 
     Raises ValueError (missing, unreadable, or no points) naming the problem.
     """
@@ -201,13 +233,14 @@ def read_points_ply(path, with_properties: bool = False):
         attrs = getattr(loaded, "metadata", {}).get("_ply_raw", {}).get("vertex", {}).get("data")
         # binary PLY: a structured array; ASCII PLY: a dict of (n, 1) arrays
         names = attrs.keys() if isinstance(attrs, dict) else (getattr(getattr(attrs, "dtype", None), "names", None) or ())
-        for n in POINT_PROPERTIES:
+        kinds = [(n, np.int64) for n in POINT_PROPERTIES] + [(n, np.float64) for n in CONTACT_PROPERTIES]
+        for n, t in kinds:
             if n in names:
-                props[n] = np.asarray(attrs[n], dtype=np.int64).reshape(-1)
+                props[n] = np.asarray(attrs[n], dtype=t).reshape(-1)
         if not props and hasattr(loaded, "vertex_attributes"):
-            for n in POINT_PROPERTIES:
+            for n, t in kinds:
                 if n in loaded.vertex_attributes:
-                    props[n] = np.asarray(loaded.vertex_attributes[n], dtype=np.int64).reshape(-1)
+                    props[n] = np.asarray(loaded.vertex_attributes[n], dtype=t).reshape(-1)
     if pts.ndim != 2 or pts.shape[0] == 0 or pts.shape[1] != 3:
         raise ValueError(f"{path} contains no 3D points; pass a PLY or XYZ file with points")
     if not np.all(np.isfinite(pts)):

@@ -113,6 +113,17 @@ def estimate_mesh(result: Result, height: float | None = None):
     return m
 
 
+def write_exploration_points(ex: Exploration, path):
+    """Write ``ex.points`` as PLY with their wrap, attempt and link, and, when they are localised
+    contacts, the :data:`~explore3d.export.CONTACT_PROPERTIES` of each (same order)."""
+    from .export import contact_properties, write_points_ply
+
+    extra = None
+    if ex.config.points == "contacts" and ex.contacts is not None:
+        extra = contact_properties(ex.contacts.select(ex.contacts.used))
+    return write_points_ply(ex.points, path, ex.point_wrap, ex.point_attempt, ex.point_link, extra=extra)
+
+
 def write_result(result: Result, mesh, out, fmt: str = "obj", pictures: bool = True, *,
                  density: float | None = None, height: float | None = None) -> list[str]:
     """Write a run's files into folder ``out`` (created) and return their names:
@@ -125,7 +136,9 @@ def write_result(result: Result, mesh, out, fmt: str = "obj", pictures: bool = T
       :data:`~explore3d.export.DEFAULT_DENSITY_KG_M3`) (plus ``estimate.obj`` when ``fmt`` is not
       obj/stl);
     * ``estimate_polygon.json`` (planar): the polygon as a list of [x, y], metres, counter-clockwise;
-    * ``points.ply``: the link points with their wrap, attempt and link;
+    * ``points.ply``: the hull's input points with their wrap, attempt and link; localised
+      contacts (the default) also with their normal, force, uncertainty, the face segment across
+      the link's height and the interval along the link (:func:`write_exploration_points`);
     * ``figure.png``/``views.png``, ``overview.png``, ``scene.png`` with ``pictures=True``.
 
     ``mesh`` is the explored object (closed trimesh, metres), used for the pictures only.  Files
@@ -141,7 +154,7 @@ def write_result(result: Result, mesh, out, fmt: str = "obj", pictures: bool = T
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     ex, estimate = result.exploration, result.estimate
-    write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
+    write_exploration_points(ex, out / "points.ply")
     names = ["points.ply"]
     if ex.config.mode == "planar":
         ring = [[float(x), float(y)] for x, y in list(estimate.exterior.coords)[:-1]]
@@ -408,7 +421,8 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
         out: output folder (created).
         output: what to write (:class:`OutputConfig`).
         calibrate: first calibrate the contact thickness on the known 60 mm ball
-            (:func:`~explore3d.calibration.calibrate_thickness`, never ``mesh``) and explore with it.
+            (:func:`~explore3d.calibration.calibrate_thickness`, never ``mesh``) and explore with it
+            (link points only: ``config.points == "links"``; ValueError otherwise).
         object_name: how the report names the object; source: more facts about how ``mesh`` was
             made (e.g. ``{"scale": ..., "size": ...}``), copied into ``report["config"]``.
 
@@ -428,7 +442,6 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
     from pathlib import Path
 
     from .arm import load_arm
-    from .export import write_points_ply
     from .io import atomic_write_text, json_text
 
     if out is None:
@@ -453,6 +466,10 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
         "versions": package_versions(),
         "timings": timings,
     }
+    if calibrate and config.points != "links":
+        raise ValueError("calibrate corrects the thickness of the paper's link points; the localised contacts "
+                         "(the default) lie on the links' surfaces already: explore with points='links' "
+                         "(--points links) to calibrate, or drop calibrate (--calibrate)")
     if calibrate:
         from .calibration import calibrate_thickness
 
@@ -481,7 +498,7 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
             timings["explore_s"] = float(ex.wall_s)
             report.update(exploration_summary(ex))
             if len(ex.points):
-                write_points_ply(ex.points, out / "points.ply", ex.point_wrap, ex.point_attempt, ex.point_link)
+                write_exploration_points(ex, out / "points.ply")
         report["error"] = str(exc)
         finish()
         raise

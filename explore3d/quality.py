@@ -283,12 +283,20 @@ def contact_gaps(spec: ArmSpec, q, T_world_base, contact, sdf, face: str = "inne
 def exploration_points_3d(exploration) -> list[dict]:
     """The exploration's own link points, grouped: per attempt (wraps in order, then attempts) a
     dict {link: (k, 3) points, world frame, metres} for the links present in
-    :attr:`Exploration.points`.  Planar explorations store x-y only; the height is restored from
+    :attr:`Exploration.points` (for an exploration that hulled localised contacts, the link points
+    of its contact-flagged links, :func:`explore3d.explore.contact_points`).  Planar explorations store x-y only; the height is restored from
     the kinematics (the points lie in the arm's plane).  Every stored point is checked against
     :func:`explore3d.kinematics.link_surface_points` of its attempt's joint angles and config."""
+    import dataclasses
+
+    from .explore import contact_points
     from .kinematics import link_surface_points
 
     ex, cfg, spec = exploration, exploration.config, exploration.spec
+    if cfg.points != "links":  # the hull took localised contacts: the link points of the same attempts
+        cfg = dataclasses.replace(cfg, points="links")
+        P, W, A, L = contact_points(spec, ex.attempts, cfg)
+        ex = dataclasses.replace(ex, config=cfg, points=P, point_wrap=W, point_attempt=A, point_link=L)
     d = ex.points.shape[1]
     out = []
     for wi, atts in enumerate(ex.attempts):

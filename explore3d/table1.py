@@ -25,7 +25,7 @@ def _planar_row(case, obj, arm, directions, mirrored, attempts=4, a=PAPER_A):
     from .pipeline import run
 
     res = run(load_object(obj), arm, ExploreConfig(mode="planar", directions=directions, mirrored=mirrored,
-                                                 attempts=attempts), a=a)
+                                                 attempts=attempts, points="links"), a=a)  # the paper's rule
     paper = PAPER_TABLE_I.get(case, (None, None))
     return {"case": case, "arm": str(arm), "paper_area_error_m2": paper[0], "paper_percent": paper[1],
             "area_error_m2": res.error.sym_diff, "percent": res.error.percent}
@@ -64,8 +64,9 @@ def table3d_rows(a: float = DEFAULT_A, arm="default", config=None, calibrate: bo
                  progress=None) -> list[dict]:
     """The default arm's 3D volume errors on the cube, the cylinder and the sphere.
 
-    Each object is explored with ``config`` (default: ``ExploreConfig(jobs=jobs)``, the 3D
-    defaults) and reconstructed from joint angles alone; with ``calibrate`` the contact thickness
+    Each object is explored with ``config`` (default: ``ExploreConfig(jobs=jobs, points="links")``,
+    the 3D defaults with the paper's link points, which the calibrated thickness corrects) and
+    reconstructed from joint angles alone; with ``calibrate`` the contact thickness
     is first calibrated once on the known 60 mm ball (:func:`explore3d.calibration.calibrate_thickness`,
     never one of the objects under test) and every object is also reconstructed with it.  Returns
     dicts with case, object, arm, n_wraps, a, percent and volume_error_m3 (uncalibrated),
@@ -79,7 +80,7 @@ def table3d_rows(a: float = DEFAULT_A, arm="default", config=None, calibrate: bo
     from .objects import load_object
     from .pipeline import reconstruct_exploration, run
 
-    config = ExploreConfig(jobs=jobs) if config is None else config
+    config = ExploreConfig(jobs=jobs, points="links") if config is None else config
     offset = None
     if calibrate:
         from .calibration import calibrate_thickness
