@@ -50,7 +50,10 @@ class ExploreConfig:
             only small corner sections the arm cannot follow, 25% volume error against 15% for
             the same number of wraps through the centre).
         angles: 3d: approach angles per plane.
-        attempts: attempts per wrap (the base joint stops ``base_step`` short each time).
+        attempts: attempts per wrap (the base joint stops ``base_step`` short each time).  None
+            (default): 4 planar, 1 in 3d.  Planar runs hull few localised contacts per attempt:
+            measured with 3 directions, 1 / 4 attempts gave 5 / 47 contacts on the 80 mm cube (no
+            polygon / 1.3% area error) and 13 / 41 on the cylinder (15.0 / 1.95%).
         base_step: rad.
         clearance: metres between the straight arm and the rough bounding circle at the start.
         n_along, n_height: surface points per link face along its length and height (3d; planar
@@ -78,7 +81,7 @@ class ExploreConfig:
     mirrored: bool = False
     offsets: int = 1
     angles: int = 2
-    attempts: int = 1
+    attempts: int | None = None
     base_step: float = 0.1
     clearance: float = 0.01
     n_along: int = 5
@@ -100,6 +103,8 @@ class ExploreConfig:
                              f"(the paper's link faces); got {self.points!r}")
         if self.directions is None:
             object.__setattr__(self, "directions", 3 if self.mode == "planar" else 48)
+        if self.attempts is None:
+            object.__setattr__(self, "attempts", 4 if self.mode == "planar" else 1)
         for name in ("directions", "offsets", "angles", "attempts", "n_along", "n_height"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:

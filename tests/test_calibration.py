@@ -41,7 +41,8 @@ def tangent_base(centre, radius, direction, tangent, link, gap):
     return T
 
 
-def synthetic_exploration(centre, radius, gaps, links, directions, config=ExploreConfig(n_along=5, n_height=3)):
+def synthetic_exploration(centre, radius, gaps, links, directions,
+                          config=ExploreConfig(n_along=5, n_height=3, points="links")):
     """A stand-in for an Exploration: one straight-arm attempt per gap, link ``links[i]``
     tangent to the ball at ``gaps[i]`` along ``directions[i]`` (unit, world frame), joints
     0..links[i] flagged, points made as explore makes them."""
