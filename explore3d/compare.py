@@ -45,20 +45,22 @@ class CompareColumn:
         return asdict(self)
 
 
-def _column(name, points, wrap, res, seed) -> CompareColumn:
+def _column(name, points, wrap, ctx, seed) -> CompareColumn:
+    """Score ``points`` (m, >= d) hulled as the pipeline does; ``ctx``: d, centre, radius, a,
+    method, truth."""
     from .metrics import shape_error
     from .pipeline import reconstruct_points
     from .skin import surface_coverage
 
-    d = res.exploration.points.shape[1]
-    P = np.asarray(points, dtype=float)[:, :d]
+    P = np.asarray(points, dtype=float)
+    P = P.reshape(len(P), -1)[:, : ctx["d"]]
     try:
-        hull = reconstruct_points(P, wrap, res.centre, res.radius, a=res.hull.a, method=res.hull.method)
-        err = shape_error(hull.shape(), res.truth, seed=seed)
+        hull = reconstruct_points(P, wrap, ctx["centre"], ctx["radius"], a=ctx["a"], method=ctx["method"])
+        err = shape_error(hull.shape(), ctx["truth"], seed=seed)
         e, iou, ch = err.percent, err.iou, err.chamfer_m
     except ValueError:  # too few points for a hull
         e, iou, ch = float("nan"), float("nan"), float("nan")
-    c3, c6 = surface_coverage(res.truth, P, seed=seed)
+    c3, c6 = surface_coverage(ctx["truth"], P, seed=seed)
     return CompareColumn(name, e, iou, ch, c3, c6, int(len(P)))
 
 
@@ -150,7 +152,8 @@ def compare(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: flo
     points that carry force; and the localisation against the skin (:func:`localisation_scores`).
 
     Returns:
-        a JSON-ready dict: ``columns`` (list of :class:`CompareColumn` dicts), ``localisation``
+        a JSON-ready dict: ``columns`` (list of :class:`CompareColumn` dicts; NaN scores where a
+        point set gives no hull), ``localisation``
         (all localised contacts) and ``localisation_used`` (those hulled), ``n_wraps``,
         ``n_contacts`` (detections), ``skin_contacts`` and ``skin_loaded`` (skin points),
         ``explore_s`` and ``skin_s`` (wall-clock seconds).
@@ -158,23 +161,30 @@ def compare(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: flo
     import dataclasses
     import time
 
-    from .explore import contact_points
-    from .pipeline import run
+    from .explore import contact_points, explore
+    from .pipeline import NoContactError, planar_truth, rough_bound_or
     from .skin import ideal_skin
 
     config = dataclasses.replace(config, points="contacts")
-    res = run(mesh, arm, config, a=a, centre=centre, radius=radius, seed=seed, progress=progress)
-    ex = res.exploration
+    centre, radius = rough_bound_or(mesh, centre, radius)
+    ex = explore(mesh, arm, config, centre=centre, radius=radius, progress=progress)
+    if ex.n_contacts == 0:
+        raise NoContactError("the arm made no contact with the object: nothing to compare; use a longer arm, a "
+                             "smaller object or a correct rough bound", exploration=ex)
+    ctx = {"d": 2 if config.mode == "planar" else 3, "centre": centre, "radius": radius, "a": a,
+           "method": "exponential",
+           "truth": planar_truth(mesh, float(centre[2])) if config.mode == "planar" else mesh}
     t0 = time.perf_counter()
     skin = ideal_skin(ex, mesh)
     skin_s = time.perf_counter() - t0
     link_cfg = dataclasses.replace(config, points="links")
     L, Lw, _, _ = contact_points(ex.spec, ex.attempts, link_cfg)
-    cols = [_column("link points (paper)", L, Lw, res, seed),
-            _column("localised contacts", ex.points, ex.point_wrap, res, seed),
-            _column("ideal skin, all contacts", skin.points, skin.wrap, res, seed),
-            _column("ideal skin, loaded contacts", skin.points[skin.loaded], skin.wrap[skin.loaded], res, seed)]
-    # the pipeline's own score is the second column's (same points, same hull)
+    cols = [_column("link points (paper)", L, Lw, ctx, seed),
+            _column("localised contacts", ex.points, ex.point_wrap, ctx, seed),
+            _column("ideal skin, all contacts", skin.points, skin.wrap, ctx, seed),
+            _column("ideal skin, loaded contacts", skin.points[skin.loaded], skin.wrap[skin.loaded], ctx, seed)]
+    # the pipeline's own score is the second column's (same points, same hull); a column without
+    # enough points for a hull scores NaN
     return {"mode": config.mode, "n_wraps": ex.n_wraps, "n_contacts": ex.n_contacts, "skin_contacts": len(skin),
             "skin_loaded": int(skin.loaded.sum()), "explore_s": float(ex.wall_s), "skin_s": float(skin_s),
             "columns": [c.to_dict() for c in cols],

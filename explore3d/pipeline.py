@@ -346,7 +346,8 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
         what = str(exc).split("; ")[0]  # inverse_hull's own fix hints are about its arguments, not the run
         n_used = int(hull_input_mask(ex.points, ex.point_wrap, centre, radius).sum())
         raise ReconstructionError(
-            f"no shape from the {n_used} link points within {radius:.3g} m of the rough centre ({what}); "
+            f"no shape from the {n_used} {'localised contacts' if config.points == 'contacts' else 'link points'} "
+            f"within {radius:.3g} m of the rough centre ({what}); "
             "explore from more directions or with more attempts (ExploreConfig directions/attempts, --directions/"
             "--attempts) so the arm surrounds the object, or correct the rough centre/radius", exploration=ex,
         ) from None

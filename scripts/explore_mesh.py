@@ -34,16 +34,20 @@ def options(description: str) -> argparse.ArgumentParser:
     p.add_argument("--a", type=_positive, default=DEFAULT_A, help=f"inverse-hull coarseness > 0 (default {DEFAULT_A})")
     p.add_argument("--seed", type=int, default=0, help="seed of the error measure's surface samples")
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
-    p.add_argument("--quick", action="store_true", help="a tiny exploration (3 wraps, 1 attempt) that runs in seconds")
+    p.add_argument("--quick", action="store_true", help="a small exploration that runs in seconds (planar: 3 directions x 4 attempts; "
+                        "3d: 16 planes, 1 angle)")
     p.add_argument("--no-pictures", action="store_true", help="skip the PNG pictures")
     return p
 
 
 def exploration_config(args) -> ExploreConfig:
-    """--quick: 3 wraps of one attempt; planar: 3 directions 90 degrees apart with 4 attempts (the
-    paper's recommendation); 3d: ExploreConfig's defaults."""
+    """--quick: planar 3 directions x 4 attempts, 3d 16 planes x 1 angle (localised contacts need a few
+    dozen readings for a hull); planar: 3 directions 90 degrees apart with 4 attempts (the paper's
+    recommendation); 3d: ExploreConfig's defaults."""
     if args.quick:
-        return ExploreConfig(mode=args.mode, directions=3, offsets=1, angles=1, attempts=1, jobs=args.jobs)
+        if args.mode == "planar":
+            return ExploreConfig(mode="planar", directions=3, attempts=4, jobs=args.jobs)
+        return ExploreConfig(mode="3d", directions=16, offsets=1, angles=1, attempts=1, jobs=args.jobs)
     if args.mode == "planar":
         return ExploreConfig(mode="planar", directions=3, attempts=4, jobs=args.jobs)
     return ExploreConfig(mode="3d", jobs=args.jobs)

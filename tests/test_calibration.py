@@ -123,12 +123,14 @@ def test_calibrated_offset_reduces_the_gap_on_a_different_object():
     cube's contact points come closer to its surface.  Measured (planar, 3 directions, 1 attempt):
     with the default 0.3 mm contact margin, offset 0.40 mm from 22 contact links, cube median
     point gap 0.49 mm without, 0.15 mm with; with PyBullet's own 1 mm margin (commit 23800cb's
-    controller) offset 1.00 mm, gaps 1.07 / 0.28 mm.  The offset recovers the contact margin."""
+    controller) offset 1.00 mm, gaps 1.07 / 0.28 mm.  Since the held arm settles until still after
+    each contact (the localisation's quasi-static readings) the held links relax a little farther
+    off: offset 0.52 mm, no longer the margin itself, so the margin is asserted as a lower bound."""
     config = ExploreConfig(mode="planar", directions=3, attempts=1)
     margin = config.sim.collision_margin
     cal = calibrate_thickness("default", config)
     assert cal.n_points >= 10
-    assert abs(cal.face_offset_m - margin) < 0.2e-3
+    assert margin - 0.2e-3 < cal.face_offset_m < margin + 0.5e-3
     assert cal.gap_p10_m <= cal.face_offset_m <= cal.gap_p90_m
     cube = load_object("cube")
     sdf = SignedDistance(cube)

@@ -1,5 +1,6 @@
 """explore3d.run (the pipeline): the robot's rough bound, no-contact and reconstruction failures
 without mocks, and the planar truth of multi-body meshes."""
+import dataclasses
 import json
 import os
 import subprocess
@@ -55,11 +56,21 @@ def test_wrong_rough_bound_is_what_the_robot_uses():
 def test_points_not_around_the_centre_raise_reconstruction_error():
     """One short wrap from one side does not surround the rough centre: a ValueError naming the fix."""
     with pytest.raises(ReconstructionError) as info:
-        run(load_object("cube"), TINY, PLANAR1)
+        run(load_object("cube"), TINY, dataclasses.replace(PLANAR1, points="links"))
     assert isinstance(info.value, ValueError)
     assert info.value.exploration.n_contacts > 0
     msg = _one_line(str(info.value))
-    assert "outside the convex hull" in msg and "directions" in msg
+    assert "outside the convex hull" in msg and "link points" in msg and "directions" in msg
+
+
+def test_too_few_localised_contacts_raise_reconstruction_error():
+    """The same wrap, localised contacts: too few for a shape; the message names them and the fix."""
+    with pytest.raises(ReconstructionError) as info:
+        run(load_object("cube"), TINY, PLANAR1)
+    assert info.value.exploration.n_contacts > 0
+    assert info.value.exploration.contacts.used.sum() < 3
+    msg = _one_line(str(info.value))
+    assert "localised contacts" in msg and "directions" in msg and "attempts" in msg
 
 
 @pytest.mark.parametrize("kw,word", [({"centre": (0.0, 0.0)}, "3 components"),

@@ -214,9 +214,13 @@ def test_quality_needs_recorded_trajectories():
 #: The 3D bounds cover the spread over wrap sets, not one sample: the same 3D runs with 3, 5, 6, 7
 #: and 8 plane normals (commit 9cfefab + the 3-ray sign test) gave false fractions 0.000-0.056,
 #: held knock-off 0.068-0.156 rad, distal 0.036-0.130 rad; a different floating-point rounding
-#: (another CPU) draws another sample from that spread.
+#: (another CPU) draws another sample from that spread.  Since the arm settles until still after
+#: each contact (the localisation's quasi-static readings; 2026-11-26): false fraction 0.076 / 0.054,
+#: held knock-off 0.170 / 0.037 rad, distal 0.025 / 0.020 rad, longest delay 1.29 / 1.28 s; the
+#: planar held bound went from 0.15 to the 3D runs' 0.2 rad with it (the planar held knock-off
+#: rose, the others fell).
 BOUNDS = {
-    "planar_run": dict(false_fraction=0.15, knock_off_held_max_rad=0.15, knock_off_distal_max_rad=0.15),
+    "planar_run": dict(false_fraction=0.15, knock_off_held_max_rad=0.2, knock_off_distal_max_rad=0.15),
     "spatial_run": dict(false_fraction=0.08, knock_off_held_max_rad=0.2, knock_off_distal_max_rad=0.2),
 }
 
