@@ -76,6 +76,12 @@ class ControlConfig:
             over itself).
         settle_steps: steps the arm is held still after being reset straight and after each
             sweep (lets the impact of a contact die out before the next joint moves).
+        press_while_settling: during a contact's settle (below) the swept joint keeps its sweep
+            reference (ahead of where it stalled) and its sweep torque limit, so it goes on pressing
+            the touching link gently against the object and the settled reading carries the
+            contact's force; afterwards it is held where it stands with the full torque.  Off: it
+            is held where it stalled from the detection on, and the contact may relax to no force
+            before the reading (a contact without force cannot be localised).
         contact_settle_steps: after a detected contact the arm is held until it is still (below),
             at most this many steps (>= ``settle_steps``); the reading then is the attempt's
             *moment* for that contact (:attr:`Attempt.moments`): a quasi-static reading the
@@ -103,6 +109,7 @@ class ControlConfig:
     rereference_held: bool = True
     max_curl: float = 2 * math.pi
     settle_steps: int = 3
+    press_while_settling: bool = True
     contact_settle_steps: int = 40
     still_speed: float = 0.03
     still_steps: int = 8
@@ -123,7 +130,7 @@ class ControlConfig:
         check_field(self, "still_speed", 0, "rad/s")
         check_field(self, "still_steps", 1, integer=True)
         check_field(self, "max_sweep_steps", 1, integer=True)
-        for name in ("watch_held", "gravity_compensation", "rereference_held"):
+        for name in ("watch_held", "gravity_compensation", "rereference_held", "press_while_settling"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"ControlConfig.{name} must be True or False; got {getattr(self, name)!r}")
 
@@ -250,9 +257,10 @@ class Controller:
             q = self.send(q_ref)
         return q
 
-    def settle(self, q_ref) -> tuple[bool, JointReading]:
+    def settle(self, q_ref, limits=None) -> tuple[bool, JointReading]:
         """Hold ``q_ref`` at least ``settle_steps`` and at most ``contact_settle_steps`` steps,
-        until the arm is still (see :class:`ControlConfig`).
+        until the arm is still (see :class:`ControlConfig`); ``limits`` (n,) N m: the motors'
+        torque limits meanwhile (default the arm's).
 
         Returns:
             whether it was still, and the mean of the last ``still_steps`` readings (angles,
@@ -266,7 +274,7 @@ class Controller:
         run = 0
         window: list = []
         for i in range(cfg.contact_settle_steps):
-            self.send(q_ref)
+            self.send(q_ref, None, limits)
             window = (window + [self.reading])[-cfg.still_steps:]
             run = run + 1 if float(np.max(np.abs(self.reading.dq))) <= cfg.still_speed else 0
             if i + 1 >= cfg.settle_steps and (run >= cfg.still_steps or cfg.contact_settle_steps == cfg.settle_steps):
@@ -353,12 +361,20 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
         if reason is StopReason.CONTACT:
             contact[k] = True
             contact_step[k] = ctl.steps
-            q_ref[k] = q[k] + cfg.hold_bias
             if cfg.rereference_held:
                 q_ref[:k] = q[:k] + cfg.hold_bias * contact[:k]
-            still, reading = ctl.settle(q_ref)
+            if cfg.press_while_settling:  # keep the sweep's reference and torque limit: a gentle push
+                limits = ctl.full.copy()
+                limits[k] = sweep_torques[k]
+                still, reading = ctl.settle(q_ref, limits)
+            else:
+                q_ref[k] = q[k] + cfg.hold_bias
+                still, reading = ctl.settle(q_ref)
             moments.append(Moment(joint=k, step=ctl.steps, still=still, reading=reading))
             q = ctl.reading.q
+            if cfg.press_while_settling:  # then hold where it is with the full torque
+                q_ref[k] = q[k] + cfg.hold_bias
+                q = ctl.hold(q_ref)
         else:
             q = ctl.hold(q_ref)
         reasons.append(reason)

@@ -327,10 +327,10 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     from shapely.geometry import Polygon
 
     arm = tmp_path / "tiny.urdf"
-    assert main(["arm", "--out", str(arm), "--n-links", "8", "--link-length", "0.02"]) == 0
+    assert main(["arm", "--out", str(arm), "--n-links", "16", "--link-length", "0.02"]) == 0
     out = tmp_path / "out"
     code, stdout, err = run(capsys, "run", "cube", "--out", str(out), "--arm", str(arm), "--mode", "planar",
-                            "--directions", "3", "--attempts", "1", "--format", "off", "--quality", "-q")
+                            "--directions", "3", "--format", "off", "--quality", "-q")
     assert code == 0, err
     report = json.loads((out / "report.json").read_text())
     assert report["object"] == "cube" and report["mode"] == "planar" and report["n_wraps"] == 3
@@ -344,13 +344,13 @@ def test_run_planar_end_to_end(tmp_path, capsys):
     assert 0 < report["timings"]["quality_s"] < report["timings"]["total_s"]
     assert report["timings"]["explore_s"] <= report["timings"]["run_s"] <= report["timings"]["total_s"]
     cq = report["contact_quality"]
-    assert cq["n_detections"] == report["n_contacts"] and cq["n_attempts"] == 3
+    assert cq["n_detections"] == report["n_contacts"] and cq["n_attempts"] == 12  # 3 wraps x 4 attempts
     assert 0.0 <= cq["false_fraction"] <= 1.0 and cq["penetration_max_m"] < 1e-3
-    assert report["config"]["arm"]["n_links"] == 8
+    assert report["config"]["arm"]["n_links"] == 16
     # the sensing and the measured per-joint contact band are recorded
     assert report["config"]["explore"]["sensors"]["encoder_counts_per_turn"] == 4096
     band = report["contact_band"]
-    assert len(band["swept_rad"]) == len(band["other_rad"]) == 8 and band["provenance"]["free_sweep_steps"]
+    assert len(band["swept_rad"]) == len(band["other_rad"]) == 16 and band["provenance"]["free_sweep_steps"]
     assert set(report["versions"]) >= {"explore3d", "numpy", "scipy", "trimesh", "pybullet", "shapely"}
     for k in ("object", "mode", "arm", "n_wraps", "n_points", "a", "method", "percent_error", "iou", "chamfer_m",
               "hausdorff_m", "true_size", "estimate_size", "wall_s", "sim_s", "steps", "config", "versions"):
@@ -398,8 +398,10 @@ def test_run_planar_end_to_end(tmp_path, capsys):
 
 # --- run is explore3d.run; every built-in object and a pybullet_data mesh ----------------------------
 
-_FAST = {"planar": ["--mode", "planar", "--directions", "3", "--attempts", "1"],
-         "3d": ["--mode", "3d", "--directions", "3", "--offsets", "1", "--angles", "1", "--attempts", "1"]}
+#: Small explorations the localised contacts (the default) give a hull from: planar 3 directions x
+#: 4 attempts (the planar default), 3D 24 planes x 1 angle.
+_FAST = {"planar": ["--mode", "planar", "--directions", "3"],
+         "3d": ["--mode", "3d", "--directions", "24", "--offsets", "1", "--angles", "1", "--attempts", "1"]}
 
 
 @pytest.mark.parametrize("mode", ["planar", "3d"])
@@ -414,9 +416,8 @@ def test_cli_and_api_give_the_same_estimate(tmp_path, capsys, small_arm, mode):
                        "--a", "0.1", "--seed", "3", "--no-pictures", "-q")
     assert code == 0, err
     report = json.loads((out / "report.json").read_text())
-    kw = {"offsets": 1, "angles": 1} if mode == "3d" else {}
-    res = api_run(load_object("l_block"), str(small_arm), ExploreConfig(mode=mode, directions=3, attempts=1, **kw),
-                  a=0.1, seed=3)
+    kw = {"directions": 24, "offsets": 1, "angles": 1, "attempts": 1} if mode == "3d" else {"directions": 3}
+    res = api_run(load_object("l_block"), str(small_arm), ExploreConfig(mode=mode, **kw), a=0.1, seed=3)
     assert (report["n_points"], report["n_points_used"]) == (len(res.exploration.points), res.n_points_used)
     for key, value in [("percent_error", res.error.percent), ("iou", res.error.iou),
                        ("chamfer_m", res.error.chamfer_m), ("hausdorff_m", res.error.hausdorff_m),
@@ -524,7 +525,7 @@ def test_run_calibrate_applies_the_ball_calibration(tmp_path, capsys, small_arm)
     runs with it: the report carries the calibration and the offset actually used; the estimate
     shrinks against the uncalibrated run of the same joint angles."""
     common = ["run", "cube", "--arm", str(small_arm), "--mode", "planar", "--directions", "3", "--attempts", "1",
-              "--no-pictures", "-q", "--jobs", "1"]
+              "--points", "links", "--no-pictures", "-q", "--jobs", "1"]
     assert run(capsys, *common, "--out", str(tmp_path / "raw"))[0] == 0
     code, _, err = run(capsys, *common, "--out", str(tmp_path / "cal"), "--calibrate")
     assert code == 0, err
@@ -588,21 +589,36 @@ def test_default_a_is_one_value_outside_the_paper_replica():
     assert (DEFAULT_A, PAPER_A) == (0.05, 0.2)
 
 
-def test_reconstruct_builds_the_hull_input_as_run_does(tmp_path, capsys, small_arm):
+@pytest.mark.parametrize("points", ["contacts", "links"])
+def test_reconstruct_builds_the_hull_input_as_run_does(tmp_path, capsys, small_arm, points):
     """``explore3d reconstruct`` on a run's points.ply with the run's rough bound and a gives the run's
     estimate: the same rough-bound cut and the same angular outlier filter over the wrap ids in the
-    file.  (This star-prism run has 10 outliers among its 574 points within the rough bound.)"""
-    from explore3d.export import read_points_ply
+    file.  (The star-prism run with link points has outliers among its points within the rough
+    bound, so the comparison can tell; localised contacts are stored at their resolved heights.)"""
+    from explore3d.export import CONTACT_PROPERTIES, read_points_ply
     from explore3d.pipeline import within_bound
 
     out = tmp_path / "o"
     code, _, err = run(capsys, "run", "star_prism", "--out", str(out), "--arm", str(small_arm), *_FAST["3d"],
-                       "--no-pictures", "-q")
+                       "--points", points, "--no-pictures", "-q")
     assert code == 0, err
     report = json.loads((out / "report.json").read_text())
-    pts = read_points_ply(out / "points.ply")
+    pts, props = read_points_ply(out / "points.ply", with_properties=True)
     n_bound = int(within_bound(pts, report["config"]["centre_m"], report["config"]["radius_m"]).sum())
-    assert report["n_points_used"] < n_bound  # the filter dropped points: the comparison can tell
+    if points == "links":
+        assert report["n_points_used"] < n_bound  # the filter dropped points: the comparison can tell
+        assert not set(CONTACT_PROPERTIES) & set(props)
+    else:
+        assert set(CONTACT_PROPERTIES) <= set(props) and report["n_points_used"] <= n_bound
+        n = np.stack([props["nx"], props["ny"], props["nz"]], axis=1)
+        np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-9)
+        assert np.all(props["force_n"] > 0) and np.all(props["uncertainty_m"] <= 0.5e-3)
+        # each point lies on its face segment across the link's height (float32 coordinates)
+        s0 = np.stack([props["seg0_x"], props["seg0_y"], props["seg0_z"]], axis=1)
+        s1 = np.stack([props["seg1_x"], props["seg1_y"], props["seg1_z"]], axis=1)
+        t = np.einsum("ij,ij->i", pts - s0, s1 - s0) / np.einsum("ij,ij->i", s1 - s0, s1 - s0)
+        assert np.all((t > -1e-4) & (t < 1 + 1e-4))
+        np.testing.assert_allclose(s0 + t[:, None] * (s1 - s0), pts, atol=1e-6)
     centre = ",".join(repr(x) for x in report["config"]["centre_m"])
     code, _, err = run(capsys, "reconstruct", str(out / "points.ply"), "--out", str(tmp_path / "re.obj"),
                        "--a", repr(report["a"]), "--centre", centre, "--radius", repr(report["config"]["radius_m"]))
@@ -624,7 +640,7 @@ def test_planar_extrusion_is_what_the_arm_sensed_not_the_true_height(tmp_path, c
     from explore3d.arm import load_arm
 
     h = load_arm(str(small_arm)).link_height
-    common = ["--arm", str(small_arm), "--mode", "planar", "--directions", "3", "--attempts", "1", "--no-pictures", "-q"]
+    common = ["--arm", str(small_arm), "--mode", "planar", "--directions", "3", "--no-pictures", "-q"]
     for height in (0.08, 0.2):
         obj = _tall_box(tmp_path / f"box{height}.stl", height)
         out = tmp_path / f"o{height}"

@@ -227,19 +227,22 @@ ORACLE_FREE = textwrap.dedent("""
     from explore3d.objects import cube
     from explore3d.pipeline import run
     arm = ArmSpec(name="small12", n_links=12, link_length=0.025)
-    res = run(cube(), arm, ExploreConfig(directions=3, angles=1, jobs=2, record=True))
+    res = run(cube(), arm, ExploreConfig(directions=24, angles=1, jobs=2, record=True))
     ex = res.exploration
     assert ex.n_contacts > 0 and ex.config.control.gravity_compensation and ex.logs is not None
     # the wraps' planes are tilted: gravity compensation actually ran (non-zero feed-forward)
     assert max(np.abs(l.tau_ff).max() for l in ex.logs) > 0
-    print("ORACLE-FREE-OK", ex.n_contacts, round(res.error.percent, 2))
+    # the hull took contacts localised from the settled readings, their heights resolved
+    assert ex.config.points == "contacts" and ex.contacts.used.sum() == len(ex.points) >= 4
+    assert np.array_equal(ex.points, ex.contacts.points[ex.contacts.used])
+    print("ORACLE-FREE-OK", ex.n_contacts, len(ex.points), round(res.error.percent, 2))
 """)
 
 
 def test_exploration_runs_with_every_world_query_removed_from_pybullet(tmp_path):
     """The world queries are deleted from the pybullet module *before* explore3d is imported, so no
     alias bound at import time escapes; a 3D exploration with gravity compensation, two worker
-    processes and the reconstruction runs in that process and its workers."""
+    processes, the contact localisation and the reconstruction runs in that process and its workers."""
     env = {**os.environ, "EXPLORE3D_CACHE_DIR": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", ORACLE_FREE.format(names=WORLD_QUERIES)], capture_output=True,
                          text=True, env=env, cwd=tmp_path, timeout=600)
