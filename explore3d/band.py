@@ -51,8 +51,9 @@ __all__ = ["calibrate_band", "cached_band", "contact_tolerance_m", "box_sphere_d
 
 log = logging.getLogger(__name__)
 
-#: Bumped whenever the calibration procedure changes (old cache entries are then ignored).
-BAND_PROTOCOL_VERSION = 3
+#: Bumped whenever the calibration procedure or the controller it runs changes (old cache entries
+#: are then ignored).  4: the pressing settle after each contact (explore3d.encircle).
+BAND_PROTOCOL_VERSION = 4
 
 #: Wrap poses of the impact phase: 3D, plane normals through the ball's centre (one approach each).
 IMPACT_NORMALS_3D = 6

@@ -79,9 +79,11 @@ class ControlConfig:
         press_while_settling: during a contact's settle (below) the swept joint keeps its sweep
             reference (ahead of where it stalled) and its sweep torque limit, so it goes on pressing
             the touching link gently against the object and the settled reading carries the
-            contact's force; afterwards it is held where it stands with the full torque.  Off: it
-            is held where it stalled from the detection on, and the contact may relax to no force
-            before the reading (a contact without force cannot be localised).
+            contact's force; afterwards it is held where it stands with the full torque.  If the
+            pressing arm does not come to rest within ``contact_settle_steps`` it is held where it
+            stands and settles again (the reading is then that second settle's).  Off: it is held
+            where it stalled from the detection on, and the contact may relax to no force before
+            the reading (a contact without force cannot be localised).
         contact_settle_steps: after a detected contact the arm is held until it is still (below),
             at most this many steps (>= ``settle_steps``); the reading then is the attempt's
             *moment* for that contact (:attr:`Attempt.moments`): a quasi-static reading the
@@ -363,12 +365,13 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
             contact_step[k] = ctl.steps
             if cfg.rereference_held:
                 q_ref[:k] = q[:k] + cfg.hold_bias * contact[:k]
+            still = False
             if cfg.press_while_settling:  # keep the sweep's reference and torque limit: a gentle push
                 limits = ctl.full.copy()
                 limits[k] = sweep_torques[k]
                 still, reading = ctl.settle(q_ref, limits)
-            else:
-                q_ref[k] = q[k] + cfg.hold_bias
+            if not still:  # hold where it stands (after a press that never came to rest: let go)
+                q_ref[k] = ctl.reading.q[k] + cfg.hold_bias
                 still, reading = ctl.settle(q_ref)
             moments.append(Moment(joint=k, step=ctl.steps, still=still, reading=reading))
             q = ctl.reading.q
