@@ -110,9 +110,15 @@ def replay_wrap(exploration, mesh, wrap: int) -> WrapReplay:
         for a, b in zip(atts, rec))
     Qr, Q, F = (np.array(log[k]) for k in ("q_ref", "q", "forces"))
     s = len(Q)
+    if s == 0:
+        Qr, Q, F = (np.zeros((0, n)) for _ in range(3))
     attempt = np.searchsorted(np.array(starts), np.arange(s), side="right") - 1
-    sweeping = np.array(log["sweep"], dtype=bool)
     changed = Qr != np.vstack([np.zeros((1, n)), Qr[:-1]])
+    # a sweep step sends a reduced torque limit to the swept joint and moves that joint's reference
+    # (a contact's pressing settle keeps the reduced limit but holds the reference still)
+    reduced = F < np.asarray(obs._full)[None, :]
+    k_red = np.argmax(reduced, axis=1)
+    sweeping = reduced.any(axis=1) & changed[np.arange(s), k_red]
     top = np.where(changed.any(axis=1), n - 1 - np.argmax(changed[:, ::-1], axis=1), -1)
     sweep_joint = np.full(s, -1)
     for t in np.flatnonzero(sweeping):  # the highest joint whose reference moved; else as before

@@ -549,7 +549,7 @@ def test_run_calibrate_and_face_offset_exclude_each_other(tmp_path, capsys):
 def test_quality_figures_are_opt_in(tmp_path, capsys, small_arm):
     """Without --quality: no contact-quality figures, no recorded trajectories, no quality time;
     --no-quality (the default) is still accepted; --quality and --no-quality exclude each other."""
-    common = ["run", "cube", "--arm", str(small_arm), "--mode", "planar", "--directions", "3", "--attempts", "1",
+    common = ["run", "cube", "--arm", str(small_arm), "--mode", "planar", "--directions", "3", "--attempts", "1", "--points", "links",
               "--no-pictures", "-q"]
     for extra in ([], ["--no-quality"]):
         out = tmp_path / f"o{len(extra)}"

@@ -86,7 +86,7 @@ def test_run_positional_call_progress_and_result():
     """The documented positional signature; the hull uses exactly the points within the rough radius."""
     calls = []
     arm = ArmSpec(name="small16", n_links=16, link_length=0.02)
-    res = run(load_object("cylinder"), arm, ExploreConfig(mode="planar", directions=3, attempts=1), 0.1,
+    res = run(load_object("cylinder"), arm, ExploreConfig(mode="planar", directions=3), 0.1,
               "exponential", lambda done, total: calls.append((done, total)))
     assert calls == [(1, 3), (2, 3), (3, 3)]
     c, radius = rough_bound(load_object("cylinder").vertices)
