@@ -1,6 +1,6 @@
 """Contact localisation from proprioception: where on which link the chain touches, from the
-joint angles and the external joint torques at one quasi-static moment (pure numpy; research
-prototype).
+joint angles and the external joint torques at one quasi-static moment (pure numpy).  The
+pipeline calls it through :mod:`explore3d.contacts` on each detection's settled reading.
 
 Model.  All joint axes are the base z axis, contact is frictionless, so a contact on link i at
 point p (world) with force F (along the contact normal, pushing the link away from the object)

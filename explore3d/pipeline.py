@@ -147,7 +147,7 @@ def write_result(result: Result, mesh, out, fmt: str = "obj", pictures: bool = T
     import json
     from pathlib import Path
 
-    from .export import DEFAULT_DENSITY_KG_M3, check_format, write_estimate_urdf, write_mesh, write_points_ply
+    from .export import DEFAULT_DENSITY_KG_M3, check_format, write_estimate_urdf, write_mesh
     from .io import atomic_write_text
 
     fmt = check_format(fmt)
