@@ -4,7 +4,9 @@ touched, with the force, the normal and the uncertainty (pure numpy on the robot
 Every detected contact of an attempt ends with a settled reading (:class:`explore3d.encircle.Moment`:
 joint angles and motor torques once the arm is still).  :func:`localise_moment` turns one into
 contacts with :func:`explore3d.localise.localise`; :func:`localise_attempts` does every moment of
-an exploration and gathers them into a :class:`ContactSet`.  Nothing here reads the simulator:
+an exploration and gathers them into a :class:`ContactSet`; :func:`contacts_for_hull` chooses the
+certain ones and, in 3D, their height across the link (:func:`resolve_heights`).  Nothing here
+reads the simulator:
 only the readings, the arm's model, the known base pose, gravity and the sensing's datasheet
 figures (its torque noise and resolution, its encoder's counts).
 """
@@ -20,7 +22,8 @@ from .localise import Localisation, external_torques, localise
 from .sensing import SensorConfig
 
 __all__ = ["ContactSet", "localise_moment", "localise_attempts", "torque_sigma_nm", "position_sigma_m",
-           "MODEL_TORQUE_SIGMA_NM"]
+           "contact_uncertainty_m", "resolve_heights", "contacts_for_hull", "MODEL_TORQUE_SIGMA_NM",
+           "MAX_UNCERTAINTY_M", "MAX_RESIDUAL_SIGMAS", "JUDGE_A"]
 
 #: The smallest torque uncertainty a fit assumes, N m: the model's own error at a settled
 #: moment (PyBullet's unmodelled joint damping and the residual motion left 1e-5 to 6e-5 N m
