@@ -59,7 +59,7 @@ class _ContactObservingRobot(ForwardingRobot):
     def __init__(self, world, robot: Robot):
         super().__init__(robot)
         self._world = world
-        self.log: dict = {k: [] for k in ("q_ref", "q", "forces", "torque", "dist", "force", "sweep")}
+        self.log: dict = {k: [] for k in ("q_ref", "q", "forces", "torque", "dist", "force")}
         self.starts: list = []
         self._full = np.array(robot.spec.joint_torques())
 
@@ -80,7 +80,6 @@ class _ContactObservingRobot(ForwardingRobot):
         self.log["q"].append(r.q.copy())
         self.log["torque"].append(r.tau.copy())
         self.log["forces"].append(lim)
-        self.log["sweep"].append(bool((lim < self._full).any()))  # settle steps hold with the full torques
         self.log["dist"].append(d)
         self.log["force"].append(f)
 
@@ -110,13 +109,11 @@ def replay_wrap(exploration, mesh, wrap: int) -> WrapReplay:
         for a, b in zip(atts, rec))
     Qr, Q, F = (np.array(log[k]) for k in ("q_ref", "q", "forces"))
     s = len(Q)
-    if s == 0:
-        Qr, Q, F = (np.zeros((0, n)) for _ in range(3))
     attempt = np.searchsorted(np.array(starts), np.arange(s), side="right") - 1
     changed = Qr != np.vstack([np.zeros((1, n)), Qr[:-1]])
     # a sweep step sends a reduced torque limit to the swept joint and moves that joint's reference
     # (a contact's pressing settle keeps the reduced limit but holds the reference still)
-    reduced = F < np.asarray(obs._full)[None, :]
+    reduced = F < np.asarray(spec.joint_torques())[None, :]  # settle steps hold with the full torques
     k_red = np.argmax(reduced, axis=1)
     sweeping = reduced.any(axis=1) & changed[np.arange(s), k_red]
     top = np.where(changed.any(axis=1), n - 1 - np.argmax(changed[:, ::-1], axis=1), -1)
