@@ -308,6 +308,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--out", required=True, help="output mesh (.obj .stl .ply .off .glb) or polygon .json")
     c.add_argument("--a", type=RUN_OPTIONS["a"], default=DEFAULT_A, help=f"coarseness > 0 (default {DEFAULT_A}, as run)")
     c.add_argument("--method", type=RUN_OPTIONS["method"], default="exponential")
+    c.add_argument("--free-space", metavar="NPZ", default=None,
+                   help="carve the 3D hull with the space the arm swept through (the free_space.npz a run wrote), "
+                        "as the run did")
     c.add_argument("--centre", type=_centre, default="midrange",
                    help="mean, midrange (default) or x,y[,z] in metres (2D points use x,y)")
     c.add_argument("--radius", type=_positive("--radius"),
@@ -577,6 +580,14 @@ def cmd_reconstruct(args) -> int:
         if suffix == "json":
             raise UsageError("the points are 3D: --out must be a mesh file (.obj .stl .ply .off .glb)")
         m = hull.mesh
+        if args.free_space is not None:
+            from .carve import carve
+            from .freespace import load_swept
+
+            try:
+                m = carve(m, load_swept(args.free_space)).mesh
+            except ValueError as exc:
+                raise RunError(f"--free-space: {exc}") from None
         write_mesh(m, out, suffix)
         print(f"mesh of {len(m.vertices)} vertices, {len(m.faces)} faces, volume {m.volume:.6g} m^3 -> {out}")
     return 0

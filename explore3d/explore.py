@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ._validate import check_field
+from .active import ProbeConfig
 from .arm import ArmSpec, load_arm
 from .directions import WrapPose, planar_wrap_poses, spatial_wrap_poses
 from .band import cached_band
@@ -23,7 +24,8 @@ from .contacts import ContactSet, contacts_for_hull, localise_attempts
 from .detect import ContactBand
 from .encircle import Attempt, ControlConfig, run_wrap
 from .kinematics import link_surface_points
-from .robot import RecordingRobot
+from .freespace import SweptArea, swept_area
+from .robot import ForwardingRobot, RecordingRobot
 from .sensing import SensorConfig
 from .sim import ArmSimulation, SimConfig
 
@@ -74,6 +76,11 @@ class ExploreConfig:
             mid-height points), or ``"links"``, the paper's rule: the faces of the
             contact-flagged links at the attempt's final configuration (``n_along``,
             ``n_height``, ``faces``, ``face_offset`` apply to these only).
+        free_space: rasterise the space every attempt's links swept through
+            (:func:`explore3d.freespace.swept_area`, from the measured angles) into
+            :attr:`Exploration.swept`, for carving the estimate.
+        probes: rounds of probes chosen from the current estimate after the first wraps
+            (:class:`~explore3d.active.ProbeConfig`; 3d only, needs ``free_space``); None: none.
     """
 
     mode: str = "3d"
@@ -94,6 +101,8 @@ class ExploreConfig:
     jobs: int | None = 1
     record: bool = False
     points: str = "contacts"
+    free_space: bool = True
+    probes: ProbeConfig | None = None
 
     def __post_init__(self):
         if self.mode not in ("planar", "3d"):
@@ -121,6 +130,12 @@ class ExploreConfig:
         for name, cls in (("control", ControlConfig), ("sim", SimConfig), ("sensors", SensorConfig)):
             if not isinstance(getattr(self, name), cls):
                 raise ValueError(f"ExploreConfig.{name} must be a {cls.__name__}; got {type(getattr(self, name)).__name__}")
+        if self.probes is not None and not isinstance(self.probes, ProbeConfig):
+            raise ValueError(f"ExploreConfig.probes must be a ProbeConfig or None; got {type(self.probes).__name__}")
+        if self.probes is not None and not self.free_space:
+            raise ValueError("ExploreConfig.probes needs free_space=True (probes aim at the carved estimate)")
+        if not isinstance(self.free_space, bool):
+            raise ValueError(f"ExploreConfig.free_space must be True or False; got {self.free_space!r}")
         if not isinstance(self.mirrored, bool) or not isinstance(self.record, bool):
             raise ValueError(f"ExploreConfig.mirrored and record must be True or False; got {self.mirrored!r}, {self.record!r}")
 
@@ -154,6 +169,11 @@ class Exploration:
         logs: per wrap, its :class:`~explore3d.robot.RobotLog` when ``config.record``, else None.
         contacts: the contacts localised from the settled readings
             (:class:`~explore3d.contacts.ContactSet`), whatever ``config.points``.
+        swept: the space the links swept through, one :class:`~explore3d.freespace.SweptArea`
+            per attempt (empty unless ``config.free_space``).
+        probe_rounds: one dict per round of probes (``config.probes``): its ``targets`` (t, 3) m,
+            their ``distance_m`` to the nearest contact before the round, ``wraps`` added, the
+            estimate's ``volume_m3`` before the round and ``wall_s``.
     """
 
     spec: ArmSpec
@@ -171,6 +191,8 @@ class Exploration:
     band_s: float = 0.0
     logs: tuple | None = None
     contacts: ContactSet | None = None
+    swept: tuple = ()
+    probe_rounds: tuple = ()
 
     @property
     def n_wraps(self) -> int:
@@ -220,25 +242,43 @@ def _init_worker(spec, vertices, faces, sim_config):
     _WORKER["world_args"] = (spec, vertices, faces, sim_config)
 
 
+class AngleRecorder(ForwardingRobot):
+    """Keeps the measured joint angles (n,) of every reading, per motion (a list of lists)."""
+
+    def __init__(self, robot):
+        super().__init__(robot)
+        self.motions: list[tuple[np.ndarray, list]] = []
+
+    def on_start(self, T_world_base, q0, reading) -> None:
+        self.motions.append((np.asarray(T_world_base, dtype=float), [reading.q]))
+
+    def on_step(self, command, reading) -> None:
+        self.motions[-1][1].append(reading.q)
+
+
 def _run_one(args):
     """One wrap in a worker, in a world of its own: PyBullet's ``restoreState`` does not reset
     everything (measured: wrap 11 of the default 3D cylinder run came out differently after wrap 10
     than alone, so results depended on the number of jobs), and a new world costs 4-27 ms against
     about a second per wrap.  The controller gets the robot interface only; the sensor noise is
     seeded by the wrap's index."""
-    index, T, band, config = args
+    index, T, band, config, bound = args
     spec = _WORKER["world_args"][0]
     with ArmSimulation(*_WORKER["world_args"]) as world:
         robot = world.robot(config.sensors)
         robot.reseed((0, index))
         rec = RecordingRobot(robot) if config.record else robot
-        atts = run_wrap(rec, T, band, attempts=config.attempts, base_step=config.base_step, cfg=config.control,
+        angles = AngleRecorder(rec) if config.free_space else rec
+        atts = run_wrap(angles, T, band, attempts=config.attempts, base_step=config.base_step, cfg=config.control,
                         record=config.record)
         gravity = robot.gravity
         steps, log = world.steps, (rec.log() if config.record else None)
     # the contacts from the settled readings alone (the robot's own data, its model and gravity)
     contacts = localise_attempts(spec, atts, gravity, config.sensors, wrap=index)
-    return atts, steps, log, contacts
+    # the space the links swept through, from the measured angles, the model and the base pose
+    swept = ([swept_area(spec, np.array(qs), Tb, bound[0], bound[1]) for Tb, qs in angles.motions]
+             if config.free_space else [])
+    return atts, steps, log, contacts, swept
 
 
 def attempt_points(spec: ArmSpec, attempt: Attempt, config: ExploreConfig) -> np.ndarray:
@@ -275,6 +315,81 @@ def contact_points(spec: ArmSpec, attempts, config: ExploreConfig):
     return np.concatenate(pts), np.concatenate(pw), np.concatenate(pa), np.concatenate(pl)
 
 
+class _WrapRunner:
+    """Runs wraps in this process (one job) or in a pool of worker processes kept for every round."""
+
+    def __init__(self, spec, vertices, faces, config, jobs: int):
+        self.args, self.jobs, self.pool = (spec, vertices, faces, config.sim), jobs, None
+
+    def __enter__(self):
+        if self.jobs == 1:
+            _init_worker(*self.args)
+        else:
+            import multiprocessing as mp
+
+            ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
+            self.pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=_init_worker,
+                                            initargs=self.args)
+        return self
+
+    def map(self, tasks):
+        return map(_run_one, tasks) if self.pool is None else self.pool.map(_run_one, tasks)
+
+    def __exit__(self, *exc):
+        if self.pool is None:
+            _WORKER.pop("world_args", None)
+        else:
+            self.pool.shutdown()
+
+
+def current_estimate(spec, config, centre, radius, poses, results):
+    """The estimate from the wraps run so far: the inverse hull of the hulled contacts carved by
+    the swept free space (:func:`explore3d.carve.carve`), and the hulled contact points (m, 3)."""
+    from .carve import carve
+    from .defaults import DEFAULT_A
+    from .pipeline import reconstruct_points
+
+    contacts = contacts_for_hull(ContactSet.concatenate(r[3] for r in results), config, centre, radius,
+                                 plane=wrap_planes(poses))
+    used = contacts.select(contacts.used)
+    hull = reconstruct_points(used.points, used.wrap, centre, radius, a=DEFAULT_A)
+    swept = [a for r in results for a in r[4]]
+    return carve(hull.mesh, swept).mesh, used.points
+
+
+def _probe_rounds(spec, config, centre, radius, poses, results, run_poses) -> list[dict]:
+    """Rounds of probes (:mod:`explore3d.active`): wraps through the estimate's least supported
+    surface until a round changes its volume by less than ``min_change`` or none is left."""
+    from .active import probe_poses, unsupported_targets
+
+    pc = config.probes
+    d_min = spec.link_length if pc.min_distance_m is None else pc.min_distance_m
+    excl = spec.link_height if pc.exclusion_m is None else pc.exclusion_m
+    rounds, previous, volume = [], np.zeros((0, 3)), None
+    for k in range(pc.rounds):
+        t0 = time.perf_counter()
+        try:
+            est, pts = current_estimate(spec, config, centre, radius, poses, results)
+        except ValueError as exc:  # too few contacts for a hull: nothing to aim at
+            log.info("probes: no estimate to aim at (%s)", exc)
+            break
+        v = float(est.volume)
+        if volume is not None and abs(v - volume) < pc.min_change * volume:
+            break
+        volume = v
+        targets, normals, dist = unsupported_targets(est, pts, d_min, excl, pc.targets, previous, pc.samples, seed=k)
+        if not len(targets):
+            break
+        new = probe_poses(targets, normals, centre, radius, spec.link_width, pc.orientations, config.clearance,
+                          label=f"probe r{k}", across_depth_m=spec.link_height / 2 if pc.across else None)
+        poses.extend(new)
+        run_poses(new)
+        previous = np.vstack([previous, targets])
+        rounds.append({"targets": targets, "distance_m": dist, "wraps": len(new), "volume_m3": v,
+                       "wall_s": time.perf_counter() - t0})
+    return rounds
+
+
 def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre=None, radius=None,
             progress=None) -> Exploration:
     """Explore ``mesh`` (a closed trimesh, metres, world frame) with ``arm`` (name, URDF path or
@@ -290,34 +405,29 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
     c0, r0 = rough_bound(mesh.vertices)
     centre = c0 if centre is None else np.asarray(centre, float)
     radius = r0 if radius is None else float(radius)
-    poses = wrap_poses(spec, config, centre, radius)
+    poses = list(wrap_poses(spec, config, centre, radius))
     band = cached_band(spec, config.control, config.sim, config.sensors, config.mode == "planar")
     band_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     vertices = np.asarray(mesh.vertices, dtype=float)
     faces = np.asarray(mesh.faces, dtype=np.int64)
-    tasks = [(i, p.T_world_base, band, config) for i, p in enumerate(poses)]
     jobs = config.jobs or os.cpu_count() or 1
-    results = []
-    if jobs == 1 or len(tasks) == 1:
-        _init_worker(spec, vertices, faces, config.sim)
-        try:
-            for i, t in enumerate(tasks):
-                results.append(_run_one(t))
-                if progress:
-                    progress(i + 1, len(tasks))
-        finally:
-            _WORKER.pop("world_args")
-    else:
-        import multiprocessing as mp
-
-        ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=ctx, initializer=_init_worker,
-                                 initargs=(spec, vertices, faces, config.sim)) as ex:
-            for i, r in enumerate(ex.map(_run_one, tasks)):
+    results: list = []
+    rounds: list[dict] = []
+    probing = config.probes is not None and config.probes.rounds > 0 and config.mode == "3d"
+    jobs = min(jobs, len(poses)) if not probing else jobs
+    with _WrapRunner(spec, vertices, faces, config, jobs) as runner:
+        def run_poses(new_poses):
+            first = len(results)
+            tasks = [(first + i, p.T_world_base, band, config, (centre, radius)) for i, p in enumerate(new_poses)]
+            for r in runner.map(tasks):
                 results.append(r)
                 if progress:
-                    progress(i + 1, len(tasks))
+                    progress(len(results), len(poses))
+
+        run_poses(poses)
+        if probing:
+            rounds = _probe_rounds(spec, config, centre, radius, poses, results, run_poses)
     attempts = tuple(tuple(r[0]) for r in results)
     steps = int(sum(r[1] for r in results))
     contacts = ContactSet.concatenate(r[3] for r in results)
@@ -333,4 +443,5 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
         point_wrap=pw, point_attempt=pa, point_link=pl,
         band=band, steps=steps, sim_time_s=steps * config.sim.timestep, wall_s=time.perf_counter() - t0, band_s=band_s,
         logs=tuple(r[2] for r in results) if config.record else None, contacts=contacts,
+        swept=tuple(a for r in results for a in r[4]), probe_rounds=tuple(rounds),
     )

@@ -33,6 +33,9 @@ class Result:
             ``centre`` were dropped before the hull.
         n_points_used: how many of ``exploration.points`` the hull was built from (within ``radius``,
             not angular outliers: :func:`hull_input_mask`).
+        carved: 3D runs with free space (``ExploreConfig.free_space``): the
+            :class:`~explore3d.carve.CarveResult` of cutting the swept free space out of the hull,
+            whose mesh is the estimate; else None (the estimate is the hull).
     """
 
     exploration: Exploration
@@ -42,11 +45,13 @@ class Result:
     centre: np.ndarray
     radius: float = math.nan
     n_points_used: int = -1
+    carved: object | None = None
 
     @property
     def estimate(self):
-        """The reconstructed shape: shapely Polygon (planar) or closed trimesh (3D), world frame, metres."""
-        return self.hull.shape()
+        """The reconstructed shape: shapely Polygon (planar) or closed trimesh (3D: the hull, carved
+        by the swept free space when there is some), world frame, metres."""
+        return self.hull.shape() if self.carved is None else self.carved.mesh
 
     def summary(self) -> dict:
         """The figures of a run as a JSON-ready dict: :func:`exploration_summary`, ``n_points_used``,
@@ -62,8 +67,10 @@ class Result:
         else:
             ch = est.convex_hull
             hull = {"size": float(ch.volume), "centre_m": [float(x) for x in ch.center_mass]}
+        carved = {} if self.carved is None else {"carved_m3": float(self.carved.carved_m3),
+                                                 "hull_m3": float(self.hull.mesh.volume)}
         return {**exploration_summary(self.exploration), "n_points_used": self.n_points_used,
-                "estimate_convex_hull": hull,
+                "estimate_convex_hull": hull, **carved,
                 "percent_error": e.percent, "iou": e.iou, "chamfer_m": e.chamfer_m, "hausdorff_m": e.hausdorff_m,
                 "true_size": e.true_size, "estimate_size": e.estimate_size,
                 "size_unit": "m^2" if e.dim == 2 else "m^3",
@@ -139,6 +146,9 @@ def write_result(result: Result, mesh, out, fmt: str = "obj", pictures: bool = T
     * ``points.ply``: the hull's input points with their wrap, attempt and link; localised
       contacts (the default) also with their normal, force, uncertainty, the face segment across
       the link's height and the interval along the link (:func:`write_exploration_points`);
+    * ``free_space.npz`` (runs with free space): the space every attempt swept through
+      (:func:`~explore3d.freespace.save_swept`), with which ``explore3d reconstruct
+      --free-space`` carves the hull as the run did;
     * ``figure.png``/``views.png``, ``overview.png``, ``scene.png`` with ``pictures=True``.
 
     ``mesh`` is the explored object (closed trimesh, metres), used for the pictures only.  Files
@@ -156,6 +166,11 @@ def write_result(result: Result, mesh, out, fmt: str = "obj", pictures: bool = T
     ex, estimate = result.exploration, result.estimate
     write_exploration_points(ex, out / "points.ply")
     names = ["points.ply"]
+    if ex.swept:
+        from .freespace import save_swept
+
+        save_swept(ex.swept, out / "free_space.npz")
+        names.append("free_space.npz")
     if ex.config.mode == "planar":
         ring = [[float(x), float(y)] for x, y in list(estimate.exterior.coords)[:-1]]
         atomic_write_text(out / "estimate_polygon.json", json.dumps(ring, indent=2) + "\n")
@@ -352,8 +367,14 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
             "--attempts) so the arm surrounds the object, or correct the rough centre/radius", exploration=ex,
         ) from None
     truth = planar_truth(mesh, float(centre[2])) if config.mode == "planar" else mesh
-    return Result(exploration=ex, hull=hull, truth=truth, error=shape_error(hull.shape(), truth, seed=seed),
-                  centre=centre, radius=radius, n_points_used=len(hull.points))  # the hull's input
+    carved = None
+    if config.mode == "3d" and config.free_space:
+        from .carve import carve
+
+        carved = carve(hull.mesh, ex.swept)
+    est = hull.shape() if carved is None else carved.mesh
+    return Result(exploration=ex, hull=hull, truth=truth, error=shape_error(est, truth, seed=seed),
+                  centre=centre, radius=radius, n_points_used=len(hull.points), carved=carved)  # the hull's input
 
 
 # --- a complete run: what `explore3d run` does -------------------------------------------------------

@@ -621,7 +621,8 @@ def test_reconstruct_builds_the_hull_input_as_run_does(tmp_path, capsys, small_a
         np.testing.assert_allclose(s0 + t[:, None] * (s1 - s0), pts, atol=1e-6)
     centre = ",".join(repr(x) for x in report["config"]["centre_m"])
     code, _, err = run(capsys, "reconstruct", str(out / "points.ply"), "--out", str(tmp_path / "re.obj"),
-                       "--a", repr(report["a"]), "--centre", centre, "--radius", repr(report["config"]["radius_m"]))
+                       "--a", repr(report["a"]), "--centre", centre, "--radius", repr(report["config"]["radius_m"]),
+                       "--free-space", str(out / "free_space.npz"))
     assert code == 0, err
     again, est = trimesh.load(str(tmp_path / "re.obj")), trimesh.load(str(out / "estimate.obj"))
     assert len(again.vertices) == len(est.vertices) and len(again.faces) == len(est.faces)

@@ -1,0 +1,139 @@
+"""Probes chosen from the current estimate (active exploration): where is the estimate least
+supported, and which wraps go there.
+
+After a round of wraps the estimate (a hull of the contacts, carved by the swept free space) has
+surface that no contact supports: facets bridging a concavity the chain spanned like a string,
+and carving's cut faces where a swept slab ended.  :func:`unsupported_targets` samples the
+estimate's surface and picks, farthest first, points farther than ``min_distance_m`` from every
+contact and from the targets already probed; :func:`probe_poses` puts wrap planes through each
+target: planes containing its surface normal (two orientations about it), the arm approaching from
+the side the normal points to, so the chain sweeps down onto the unsupported surface (a facet
+bridging a concavity: one of them runs along the concavity); and a plane across the normal, half a
+link height beneath the surface, whose slab is the next one under it (a face carving left where a
+swept slab ended: the plane sweeps the slab beside it).  Pure functions on numpy arrays; world
+frame, metres.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._validate import check_field
+from .directions import WrapPose, wrap_pose
+
+__all__ = ["ProbeConfig", "unsupported_targets", "probe_poses"]
+
+
+@dataclass(frozen=True)
+class ProbeConfig:
+    """Rounds of probes after the first wraps (SI units).
+
+    Attributes:
+        rounds: at most this many rounds of probes (0: none).
+        targets: at most this many targets per round.
+        orientations: wrap planes per target rotated evenly about the target's surface normal
+            (all contain the normal).
+        across: one more wrap plane per target, perpendicular to its normal, half a link height
+            beneath the surface.
+        min_distance_m: a surface sample of the estimate is unsupported when it lies farther than
+            this from every contact; None: the arm's link length (along a chain hugging a surface
+            every link touches, so contacts lie about a link apart; farther, the estimate bridges).
+        exclusion_m: targets lie at least this far from each other and from earlier rounds'
+            targets; None: the link height (the thickness of the slab one wrap sweeps).
+        min_change: stop when a round changed the estimate's volume by less than this fraction.
+        samples: surface samples of the estimate per round (seeded).
+    """
+
+    rounds: int = 3
+    targets: int = 6
+    orientations: int = 2
+    across: bool = True
+    min_distance_m: float | None = None
+    exclusion_m: float | None = None
+    min_change: float = 0.01
+    samples: int = 4000
+
+    def __post_init__(self):
+        for name, lo in (("rounds", 0), ("targets", 1), ("orientations", 1), ("samples", 10)):
+            check_field(self, name, lo, integer=True)
+        for name in ("min_distance_m", "exclusion_m"):
+            if getattr(self, name) is not None:
+                check_field(self, name, 0, "m (or None)", strict=True)
+        check_field(self, "min_change", 0)
+        if not isinstance(self.across, bool):
+            raise ValueError(f"ProbeConfig.across must be True or False; got {self.across!r}")
+
+
+def unsupported_targets(mesh, contacts, min_distance_m: float, exclusion_m: float, k: int, previous=None,
+                        samples: int = 4000, seed: int = 0):
+    """Up to ``k`` points of the estimate's surface least supported by contacts.
+
+    Args:
+        mesh: the estimate (closed trimesh, metres).
+        contacts: (m, 3) contact points, m.
+        min_distance_m: samples closer than this to a contact are supported.
+        exclusion_m: targets keep at least this distance from each other and from ``previous``.
+        previous: (p, 3) earlier targets, m (or None).
+
+    Returns:
+        points (t, 3), outward unit normals (t, 3), and each one's distance to the nearest
+        contact (t,), m; farthest first.
+    """
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    P, fi = trimesh.sample.sample_surface(mesh, samples, seed=seed)
+    N = mesh.face_normals[fi]
+    C = np.asarray(contacts, dtype=float).reshape(-1, 3)
+    d = cKDTree(C).query(P)[0] if len(C) else np.full(len(P), np.inf)
+    ok = d > min_distance_m
+    if previous is not None and len(previous):
+        ok &= cKDTree(np.asarray(previous, float).reshape(-1, 3)).query(P)[0] > exclusion_m
+    idx = np.nonzero(ok)[0]
+    idx = idx[np.lexsort((idx, -d[idx]))]  # farthest first, ties by index (deterministic)
+    chosen: list[int] = []
+    for i in idx:
+        if len(chosen) >= k:
+            break
+        if all(np.linalg.norm(P[i] - P[j]) > exclusion_m for j in chosen):
+            chosen.append(int(i))
+    c = np.array(chosen, dtype=int)
+    return P[c].reshape(-1, 3), N[c].reshape(-1, 3), d[c]
+
+
+def probe_poses(targets, normals, centre, radius: float, arm_width: float, orientations: int = 2,
+                clearance: float = 0.01, label: str = "probe", across_depth_m: float | None = None) -> list[WrapPose]:
+    """Wrap poses through each target point (t, 3): planes containing its outward normal (t, 3),
+    ``orientations`` of them evenly rotated about it, the straight arm starting on the normal's
+    side of the rough bound (centre (3,), radius m) so the chain sweeps towards the target; and,
+    unless ``across_depth_m`` is None, a plane perpendicular to the normal ``across_depth_m``
+    beneath the target, the arm starting on the side away from the rough centre."""
+    centre = np.asarray(centre, dtype=float)
+    out = []
+    for ti, (p, ns) in enumerate(zip(np.asarray(targets, float), np.asarray(normals, float))):
+        ns = ns / np.linalg.norm(ns)
+        ref = np.array([1.0, 0.0, 0.0]) if abs(ns[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        u = ref - ns * (ref @ ns)
+        u /= np.linalg.norm(u)
+        v = np.cross(ns, u)
+        for oi in range(orientations):
+            ang = math.pi * oi / orientations
+            m = math.cos(ang) * u + math.sin(ang) * v  # the plane's normal, perpendicular to ns
+            offset = float((p - centre) @ m)
+            r = math.sqrt(max(radius * radius - offset * offset, (0.2 * radius) ** 2))
+            y = -ns  # the arm starts at -y of the wrap frame: on the normal's side
+            x = np.cross(y, m)
+            R = np.stack([x, y, m], axis=1)
+            out.append(wrap_pose(centre, R, offset, r, arm_width, clearance, r, m, ang,
+                                 f"{label} t{ti} o{oi} s{offset * 1000:+.0f}mm"))
+        if across_depth_m is not None:
+            offset = float((p - across_depth_m * ns - centre) @ ns)
+            r = math.sqrt(max(radius * radius - offset * offset, (0.2 * radius) ** 2))
+            w = (p - centre) - ((p - centre) @ ns) * ns  # the target's side within the plane
+            y = -(w / np.linalg.norm(w)) if np.linalg.norm(w) > 1e-9 else -u
+            x = np.cross(y, ns)
+            out.append(wrap_pose(centre, np.stack([x, y, ns], axis=1), offset, r, arm_width, clearance, r, ns, 0.0,
+                                 f"{label} t{ti} across s{offset * 1000:+.0f}mm"))
+    return out
