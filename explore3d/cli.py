@@ -177,6 +177,8 @@ RUN_OPTIONS = {
     "collision_margin": _nonnegative("--collision-margin"),
     # what the hull is built from: contacts localised from the joint torques, or the paper's link faces
     "points": _choice("points", ("contacts", "links")),
+    # rounds of probe wraps aimed at the estimate's least supported surface (3d; 0: none)
+    "probes": _int_min("--probes", 0),
     # outputs
     "density": _positive("--density"),
     "height": _positive("--height"),
@@ -284,6 +286,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="what the hull is built from: contacts (default: localised from the joint torques, "
                         "points.ply with their normals and uncertainty) or links (the paper's rule: the faces of "
                         "the links whose sweep detected a contact)")
+    r.add_argument("--probes", type=RUN_OPTIONS["probes"], metavar="ROUNDS",
+                   help="3d: at most this many rounds of probe wraps through the estimate's least supported "
+                        "surface after the first wraps (default 3; 0: none)")
     r.add_argument("--density", type=RUN_OPTIONS["density"],
                    help=f"density of the estimate body in estimate.urdf, kg/m^3 (default {DEFAULT_DENSITY_KG_M3:g})")
     r.add_argument("--height", type=RUN_OPTIONS["height"],
@@ -341,6 +346,11 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--directions", type=RUN_OPTIONS["directions"], help="approach directions / plane normals")
     k.add_argument("--attempts", type=RUN_OPTIONS["attempts"], help="attempts per wrap")
     k.add_argument("--angles", type=RUN_OPTIONS["angles"], help="3d: approach angles per plane")
+    k.add_argument("--probes", type=RUN_OPTIONS["probes"], metavar="ROUNDS",
+                   help="3d: rounds of probe wraps aimed at the estimate (default 3; 0: none)")
+    k.add_argument("--no-free-space", dest="no_free_space", action="store_true",
+                   help="3d: neither record the swept space nor carve with it (the paper's hull of the straight "
+                        "sweeps; implies --probes 0)")
     k.add_argument("--a", type=RUN_OPTIONS["a"], default=DEFAULT_A, help=f"inverse-hull coarseness (default {DEFAULT_A})")
     k.add_argument("--size", type=RUN_OPTIONS["size"], help="rescale the object so its longest side is SIZE metres")
     k.add_argument("--jobs", type=RUN_OPTIONS["jobs"], help="worker processes for the exploration (default: all cores)")
@@ -420,6 +430,10 @@ def explore_config(opts: dict):
             kw["sensors"] = SensorConfig.ideal()
         if opts.get("collision_margin") is not None:
             kw["sim"] = SimConfig(collision_margin=opts["collision_margin"])
+        if opts.get("probes") is not None:
+            from .active import ProbeConfig
+
+            kw["probes"] = ProbeConfig(rounds=opts["probes"]) if opts["probes"] else None
         return ExploreConfig(**kw)
     except (TypeError, ValueError) as exc:
         raise UsageError(str(exc)) from None
@@ -643,9 +657,15 @@ def cmd_compare(args) -> int:
     from ._quiet import quiet_c_output
 
     _check_object_name(args.object)
-    opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs")
+    opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs", "probes")
             if getattr(args, k) is not None}
+    if args.no_free_space:
+        opts["probes"] = 0
     config = explore_config(opts)
+    if args.no_free_space:
+        import dataclasses
+
+        config = dataclasses.replace(config, free_space=False)
     with quiet_c_output():
         from .arm import load_arm
         from .compare import compare, format_compare

@@ -46,8 +46,8 @@ class CompareColumn:
 
 
 def _column(name, points, wrap, ctx, seed) -> CompareColumn:
-    """Score ``points`` (m, >= d) hulled as the pipeline does; ``ctx``: d, centre, radius, a,
-    method, truth."""
+    """Score ``points`` (m, >= d) hulled as the pipeline does (3D: carved by the exploration's swept
+    free space ``ctx["swept"]`` when it has some); ``ctx``: d, centre, radius, a, method, truth, swept."""
     from .metrics import shape_error
     from .pipeline import reconstruct_points
     from .skin import surface_coverage
@@ -56,7 +56,12 @@ def _column(name, points, wrap, ctx, seed) -> CompareColumn:
     P = P.reshape(len(P), -1)[:, : ctx["d"]]
     try:
         hull = reconstruct_points(P, wrap, ctx["centre"], ctx["radius"], a=ctx["a"], method=ctx["method"])
-        err = shape_error(hull.shape(), ctx["truth"], seed=seed)
+        est = hull.shape()
+        if ctx["d"] == 3 and ctx.get("swept"):
+            from .carve import carve
+
+            est = carve(est, ctx["swept"]).mesh
+        err = shape_error(est, ctx["truth"], seed=seed)
         e, iou, ch = err.percent, err.iou, err.chamfer_m
     except ValueError:  # too few points for a hull
         e, iou, ch = float("nan"), float("nan"), float("nan")
@@ -172,7 +177,7 @@ def compare(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: flo
         raise NoContactError("the arm made no contact with the object: nothing to compare; use a longer arm, a "
                              "smaller object or a correct rough bound", exploration=ex)
     ctx = {"d": 2 if config.mode == "planar" else 3, "centre": centre, "radius": radius, "a": a,
-           "method": "exponential",
+           "method": "exponential", "swept": list(ex.swept),
            "truth": planar_truth(mesh, float(centre[2])) if config.mode == "planar" else mesh}
     t0 = time.perf_counter()
     skin = ideal_skin(ex, mesh)
@@ -185,7 +190,8 @@ def compare(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: flo
             _column("ideal skin, loaded contacts", skin.points[skin.loaded], skin.wrap[skin.loaded], ctx, seed)]
     # the pipeline's own score is the second column's (same points, same hull); a column without
     # enough points for a hull scores NaN
-    return {"mode": config.mode, "n_wraps": ex.n_wraps, "n_contacts": ex.n_contacts, "skin_contacts": len(skin),
+    return {"mode": config.mode, "n_wraps": ex.n_wraps, "probe_wraps": int(sum(r["wraps"] for r in ex.probe_rounds)),
+            "carved": bool(ctx["swept"]) and config.mode == "3d", "n_contacts": ex.n_contacts, "skin_contacts": len(skin),
             "skin_loaded": int(skin.loaded.sum()), "explore_s": float(ex.wall_s), "skin_s": float(skin_s),
             "columns": [c.to_dict() for c in cols],
             "localisation": localisation_scores(ex, skin),

@@ -10,9 +10,12 @@ world frame, whether some wrap swept through them; :mod:`explore3d.carve` remove
 an estimate.
 
 Safety margin: a pixel is marked free only when its centre lies inside a link rectangle shrunk
-by ``margin_m`` on every side (the contact margin of the simulator, the encoder's resolution
-times the reach, and the links' small penetration under load); the slab is shrunk by the same
-margin.  Frames: ``T_world_base`` (4, 4) maps base to world coordinates; lengths in metres.
+by ``margin_m`` across its width and at the chain's two free ends (the contact margin of the
+simulator, the encoder's resolution times the reach, and the links' small penetration under
+load); the slab is shrunk by the same margin.  Not along the links at the joints between them,
+where the next link continues the chain (shrinking there would leave an unswept ring along every
+joint's path); at a bend, the end face of a link is exposed only on the bend's outer side, away
+from the curl and the object it wraps.  Frames: ``T_world_base`` (4, 4) maps base to world coordinates; lengths in metres.
 """
 from __future__ import annotations
 
@@ -58,9 +61,11 @@ class SweptArea:
         return float(self.free.sum()) * self.pixel_m ** 2
 
 
-def _lattice(spec: ArmSpec, shrink: float, spacing: float) -> np.ndarray:
-    """(k, 2) points filling a link rectangle shrunk by ``shrink``, link frame, m."""
-    x0, x1 = shrink, spec.link_length - shrink
+def _lattice(spec: ArmSpec, shrink: float, spacing: float, first: bool, last: bool) -> np.ndarray:
+    """(k, 2) points filling a link rectangle, link frame, m: shrunk by ``shrink`` across its width
+    and at the chain's free ends (the base end of the ``first`` link, the tip end of the ``last``);
+    not at the joints between links, where the next link's rectangle continues the chain."""
+    x0, x1 = (shrink if first else 0.0), spec.link_length - (shrink if last else 0.0)
     y0, y1 = -spec.link_width / 2 + shrink, spec.link_width / 2 - shrink
     if x1 < x0 or y1 < y0:
         return np.zeros((0, 2))
@@ -100,28 +105,35 @@ def swept_area(spec: ArmSpec, q, T_world_base, centre, radius: float, pixel_m: f
     if r > 0 and half > 0 and len(q):
         # points a pixel-half-diagonal deeper than the margin: the pixel holding one has its centre
         # inside the rectangle shrunk by margin_m
-        pts = _lattice(spec, margin_m + pixel_m * np.sqrt(0.5), pixel_m / np.sqrt(2.0))
+        shrink, spacing = margin_m + pixel_m * np.sqrt(0.5), pixel_m / np.sqrt(2.0)
+        n = spec.n_links
+        lattices = [_lattice(spec, shrink, spacing, i == 0, i == n - 1) for i in range(n)]
         origins, headings = link_frames_planar(spec, q)  # (t, n, 2), (t, n)
         # links whose rectangle can reach the disc (centre distance < r + half the diagonal)
         mid = origins + 0.5 * spec.link_length * np.stack([np.cos(headings), np.sin(headings)], axis=-1)
         reach = r + 0.5 * np.hypot(spec.link_length, spec.link_width)
         near = np.linalg.norm(mid - cb[:2], axis=-1) < reach
         ti, li = np.nonzero(near)
-        if len(ti) and len(pts):
+        if len(ti):
             # skip repeated poses (settling): a link whose frame moved less than a tenth of a pixel
             o, h = origins[ti, li], headings[ti, li]
             key = np.column_stack([li, np.round(o / (0.1 * pixel_m)), np.round(h * spec.link_length / (0.1 * pixel_m))])
             _, keep = np.unique(key, axis=0, return_index=True)
-            o, h = o[keep], h[keep]
+            o, h, li = o[keep], h[keep], li[keep]
             c, s = np.cos(h), np.sin(h)
-            for chunk in range(0, len(o), 256):
-                oc, cc, sc = o[chunk:chunk + 256], c[chunk:chunk + 256], s[chunk:chunk + 256]
-                x = oc[:, None, 0] + cc[:, None] * pts[None, :, 0] - sc[:, None] * pts[None, :, 1]
-                y = oc[:, None, 1] + sc[:, None] * pts[None, :, 0] + cc[:, None] * pts[None, :, 1]
-                i = np.rint((x.ravel() - origin[0]) / pixel_m).astype(np.int64)
-                j = np.rint((y.ravel() - origin[1]) / pixel_m).astype(np.int64)
-                ok = (i >= 0) & (i < n_pix) & (j >= 0) & (j < n_pix)
-                free[i[ok], j[ok]] = True
+            for kind in (0, 1, 2):  # the first link, the middle links, the last link
+                sel = (li == 0) if kind == 0 else (li == n - 1) if kind == 2 else ((li > 0) & (li < n - 1))
+                pts = lattices[0 if kind == 0 else n - 1 if kind == 2 else min(1, n - 1)]
+                idx = np.nonzero(sel)[0]
+                for chunk in range(0, len(idx), 256):
+                    j_ = idx[chunk:chunk + 256]
+                    oc, cc, sc = o[j_], c[j_], s[j_]
+                    x = oc[:, None, 0] + cc[:, None] * pts[None, :, 0] - sc[:, None] * pts[None, :, 1]
+                    y = oc[:, None, 1] + sc[:, None] * pts[None, :, 0] + cc[:, None] * pts[None, :, 1]
+                    i = np.rint((x.ravel() - origin[0]) / pixel_m).astype(np.int64)
+                    j = np.rint((y.ravel() - origin[1]) / pixel_m).astype(np.int64)
+                    ok = (i >= 0) & (i < n_pix) & (j >= 0) & (j < n_pix)
+                    free[i[ok], j[ok]] = True
     return SweptArea(T_world_base=T.copy(), origin_m=origin, pixel_m=float(pixel_m), free=free,
                      half_height_m=float(max(half, 0.0)), margin_m=float(margin_m))
 

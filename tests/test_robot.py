@@ -223,12 +223,17 @@ ORACLE_FREE = textwrap.dedent("""
     assert not any(hasattr(pybullet, n) for n in names)
     import numpy as np
     from explore3d.arm import ArmSpec
+    from explore3d.active import ProbeConfig
     from explore3d.explore import ExploreConfig
     from explore3d.objects import cube
     from explore3d.pipeline import run
     arm = ArmSpec(name="small12", n_links=12, link_length=0.025)
-    res = run(cube(), arm, ExploreConfig(directions=24, angles=1, jobs=2, record=True))
+    res = run(cube(), arm, ExploreConfig(directions=24, angles=1, jobs=2, record=True,
+                                         probes=ProbeConfig(rounds=1, targets=2)))
     ex = res.exploration
+    # a round of probe wraps ran in the workers, and the estimate was carved with the swept space
+    assert len(ex.probe_rounds) == 1 and ex.n_wraps == 24 + ex.probe_rounds[0]["wraps"] > 24
+    assert len(ex.swept) == ex.n_wraps and res.carved is not None
     assert ex.n_contacts > 0 and ex.config.control.gravity_compensation and ex.logs is not None
     # the wraps' planes are tilted: gravity compensation actually ran (non-zero feed-forward)
     assert max(np.abs(l.tau_ff).max() for l in ex.logs) > 0
@@ -242,7 +247,8 @@ ORACLE_FREE = textwrap.dedent("""
 def test_exploration_runs_with_every_world_query_removed_from_pybullet(tmp_path):
     """The world queries are deleted from the pybullet module *before* explore3d is imported, so no
     alias bound at import time escapes; a 3D exploration with gravity compensation, two worker
-    processes, the contact localisation and the reconstruction runs in that process and its workers."""
+    processes, the contact localisation, the free space, a round of probes aimed from the estimate
+    and the carved reconstruction runs in that process and its workers."""
     env = {**os.environ, "EXPLORE3D_CACHE_DIR": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", ORACLE_FREE.format(names=WORLD_QUERIES)], capture_output=True,
                          text=True, env=env, cwd=tmp_path, timeout=600)
