@@ -42,7 +42,10 @@ class ProbeConfig:
             every link touches, so contacts lie about a link apart; farther, the estimate bridges).
         exclusion_m: targets lie at least this far from each other and from earlier rounds'
             targets; None: the link height (the thickness of the slab one wrap sweeps).
-        min_change: stop when a round changed the estimate's volume by less than this fraction.
+        min_change: stop when a round changed the estimate's volume by less than this fraction
+            (default 0: every round runs while targets are left; measured on the L-block, a 1%
+            rule stopped after one round at 11.5% volume error where three rounds gave 6.4%: a
+            round aimed at one region may change little while the next, aimed elsewhere, does).
         samples: surface samples of the estimate per round (seeded).
     """
 
@@ -52,7 +55,7 @@ class ProbeConfig:
     across: bool = True
     min_distance_m: float | None = None
     exclusion_m: float | None = None
-    min_change: float = 0.01
+    min_change: float = 0.0
     samples: int = 4000
 
     def __post_init__(self):

@@ -377,7 +377,7 @@ def _probe_rounds(spec, config, centre, radius, poses, results, run_poses) -> li
             log.info("probes: no estimate to aim at (%s)", exc)
             break
         v = float(est.volume)
-        if volume is not None and abs(v - volume) < pc.min_change * volume:
+        if volume is not None and pc.min_change > 0 and abs(v - volume) < pc.min_change * volume:
             break
         volume = v
         targets, normals, dist = unsupported_targets(est, pts, d_min, excl, pc.targets, previous, pc.samples, seed=k)

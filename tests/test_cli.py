@@ -399,9 +399,10 @@ def test_run_planar_end_to_end(tmp_path, capsys):
 # --- run is explore3d.run; every built-in object and a pybullet_data mesh ----------------------------
 
 #: Small explorations the localised contacts (the default) give a hull from: planar 3 directions x
-#: 4 attempts (the planar default), 3D 24 planes x 1 angle.
+#: 4 attempts (the planar default), 3D 24 planes x 1 angle and one round of probes.
 _FAST = {"planar": ["--mode", "planar", "--directions", "3"],
-         "3d": ["--mode", "3d", "--directions", "24", "--offsets", "1", "--angles", "1", "--attempts", "1"]}
+         "3d": ["--mode", "3d", "--directions", "24", "--offsets", "1", "--angles", "1", "--attempts", "1",
+                "--probes", "1"]}
 
 
 @pytest.mark.parametrize("mode", ["planar", "3d"])
@@ -410,13 +411,15 @@ def test_cli_and_api_give_the_same_estimate(tmp_path, capsys, small_arm, mode):
     command line also records the trajectories for its quality figures: recording changes nothing)."""
     from explore3d import ExploreConfig
     from explore3d import run as api_run
+    from explore3d.active import ProbeConfig
 
     out = tmp_path / "o"
     code, _, err = run(capsys, "run", "l_block", "--out", str(out), "--arm", str(small_arm), *_FAST[mode],
                        "--a", "0.1", "--seed", "3", "--no-pictures", "-q")
     assert code == 0, err
     report = json.loads((out / "report.json").read_text())
-    kw = {"directions": 24, "offsets": 1, "angles": 1, "attempts": 1} if mode == "3d" else {"directions": 3}
+    kw = ({"directions": 24, "offsets": 1, "angles": 1, "attempts": 1, "probes": ProbeConfig(rounds=1)} if mode == "3d"
+          else {"directions": 3})
     res = api_run(load_object("l_block"), str(small_arm), ExploreConfig(mode=mode, **kw), a=0.1, seed=3)
     assert (report["n_points"], report["n_points_used"]) == (len(res.exploration.points), res.n_points_used)
     for key, value in [("percent_error", res.error.percent), ("iou", res.error.iou),

@@ -44,7 +44,7 @@ def default_arm_estimate():
     watertight (measured on the controller before the robot interface)."""
     from explore3d import ExploreConfig, run
 
-    res = run(load_object("cube"), "default", ExploreConfig(directions=4, angles=1))
+    res = run(load_object("cube"), "default", ExploreConfig(directions=4, angles=1, probes=None))
     return res.estimate, res.error.estimate_size
 
 

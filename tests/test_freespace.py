@@ -134,7 +134,7 @@ def test_the_swept_space_of_a_real_exploration_never_holds_the_object():
     from explore3d.objects import cube
 
     m = cube()
-    ex = explore(m, SMALL, ExploreConfig(directions=4, angles=1, jobs=1))
+    ex = explore(m, SMALL, ExploreConfig(directions=4, angles=1, jobs=1, probes=None))
     assert len(ex.swept) == 4
     inside = trimesh.sample.volume_mesh(m, 20000)
     assert not is_free(ex.swept, inside).any()

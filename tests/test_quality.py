@@ -196,7 +196,7 @@ def planar_run():
 @pytest.fixture(scope="module")
 def spatial_run():
     cube = load_object("cube")
-    ex = explore(cube, "default", ExploreConfig(directions=4, offsets=1, angles=1, record=True))
+    ex = explore(cube, "default", ExploreConfig(directions=4, offsets=1, angles=1, record=True, probes=None))
     return cube, ex, contact_quality(ex, cube)
 
 
