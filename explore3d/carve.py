@@ -11,6 +11,7 @@ left to cut, the estimate comes back unchanged.  Lengths in metres.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 
@@ -75,12 +76,13 @@ def carve(mesh, areas, voxel_m: float = DEFAULT_VOXEL_M, opening_voxels: int = D
     free = np.zeros(len(centres), dtype=bool)
     free[inside] = is_free(areas, centres[inside])
     vol = voxel_m ** 3
+    unchanged = CarveResult(mesh=mesh, inside_m3=inside.sum() * vol, free_m3=free.sum() * vol, carved_m3=0.0)
     cut = free.reshape(n)
     if opening_voxels:
         cut = ndimage.binary_opening(cut, structure=ndimage.generate_binary_structure(3, 3),
                                      iterations=opening_voxels)
     if not cut.any():
-        return CarveResult(mesh=mesh, inside_m3=inside.sum() * vol, free_m3=free.sum() * vol, carved_m3=0.0)
+        return unchanged
     from skimage.measure import marching_cubes
 
     # the tool reaches a voxel beyond the estimate where the cut meets its surface: no skin is left
@@ -101,9 +103,9 @@ def carve(mesh, areas, voxel_m: float = DEFAULT_VOXEL_M, opening_voxels: int = D
         out = mesh.difference(tool, engine="manifold")
     except ValueError as exc:  # the tool is not a closed volume: keep the estimate uncarved, say so
         log.warning("carving skipped: the swept free space gave no closed cutting volume (%s)", exc)
-        return CarveResult(mesh=mesh, inside_m3=inside.sum() * vol, free_m3=free.sum() * vol, carved_m3=0.0)
-    return CarveResult(mesh=out, inside_m3=inside.sum() * vol, free_m3=free.sum() * vol,
-                       carved_m3=float((cut[1:-1, 1:-1, 1:-1] & ~outside[1:-1, 1:-1, 1:-1]).sum()) * vol)
+        return unchanged
+    carved = float((cut[1:-1, 1:-1, 1:-1] & ~outside[1:-1, 1:-1, 1:-1]).sum()) * vol
+    return dataclasses.replace(unchanged, mesh=out, carved_m3=carved)
 
 
 def _contains(mesh, points: np.ndarray) -> np.ndarray:

@@ -659,9 +659,7 @@ def cmd_compare(args) -> int:
     _check_object_name(args.object)
     opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs", "probes")
             if getattr(args, k) is not None}
-    if args.no_free_space:
-        opts["probes"] = 0
-    config = explore_config(opts)
+    config = explore_config({**opts, "probes": 0} if args.no_free_space else opts)
     if args.no_free_space:
         import dataclasses
 

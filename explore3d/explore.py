@@ -24,7 +24,7 @@ from .contacts import ContactSet, contacts_for_hull, localise_attempts
 from .detect import ContactBand
 from .encircle import Attempt, ControlConfig, run_wrap
 from .kinematics import link_surface_points
-from .freespace import SweptArea, swept_area
+from .freespace import swept_area
 from .robot import ForwardingRobot, RecordingRobot
 from .sensing import SensorConfig
 from .sim import ArmSimulation, SimConfig
@@ -81,8 +81,8 @@ class ExploreConfig:
             :attr:`Exploration.swept`, for carving the estimate.
         probes: rounds of probes chosen from the current estimate after the first wraps
             (:class:`~explore3d.active.ProbeConfig`; 3d only, needs ``free_space``); None: none.
-            Measured on the default run (BENCHMARKS.md, "Free space and probes"): the L-block from
-            18.8% (no carving, no probes) to 6.4% with 150 wraps in place of 96.
+            Measured on the default run (BENCHMARKS.md, "Free space, carving and probes"): the
+            L-block from 18.8% (no carving, no probes) to 10.5% with 150 wraps in place of 96.
     """
 
     mode: str = "3d"

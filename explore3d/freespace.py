@@ -121,10 +121,9 @@ def swept_area(spec: ArmSpec, q, T_world_base, centre, radius: float, pixel_m: f
             _, keep = np.unique(key, axis=0, return_index=True)
             o, h, li = o[keep], h[keep], li[keep]
             c, s = np.cos(h), np.sin(h)
-            for kind in (0, 1, 2):  # the first link, the middle links, the last link
-                sel = (li == 0) if kind == 0 else (li == n - 1) if kind == 2 else ((li > 0) & (li < n - 1))
-                pts = lattices[0 if kind == 0 else n - 1 if kind == 2 else min(1, n - 1)]
-                idx = np.nonzero(sel)[0]
+            for link in np.unique(li):
+                pts = lattices[link]
+                idx = np.nonzero(li == link)[0]
                 for chunk in range(0, len(idx), 256):
                     j_ = idx[chunk:chunk + 256]
                     oc, cc, sc = o[j_], c[j_], s[j_]
