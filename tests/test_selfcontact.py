@@ -1,12 +1,17 @@
-"""The arm touching itself: PyBullet's self-collision and the kinematic self-distance
-(explore3d.selfcontact) against PyBullet's own geometry."""
+"""The arm touching itself: PyBullet's self-collision, the kinematic self-distance
+(explore3d.selfcontact) against PyBullet's own geometry, and self-contacts never taken for the
+object's (the localisation's flag; the controller's part is in tests/test_encircle.py)."""
 import math
 
 import numpy as np
 import pytest
 
 from explore3d.arm import ArmSpec, load_arm
-from explore3d.robot import make_command
+from explore3d.contacts import contacts_for_hull, localise_attempts
+from explore3d.encircle import Attempt, Moment
+from explore3d.explore import ExploreConfig
+from explore3d.localise import torques_of_contacts
+from explore3d.robot import JointReading, make_command
 from explore3d.selfcontact import (SELF_CONTACT_TOLERANCE_M, near_other_body, point_body_distances,
                                    rectangle_distances, self_contact_pairs, self_distances)
 from explore3d.sensing import SensorConfig
@@ -146,3 +151,55 @@ def test_self_collision_is_on_by_default_and_stops_links_passing_through():
     deepest_on, deepest_off = self_distances(spec, q_on).min(), self_distances(spec, q_off).min()
     assert deepest_off < -0.005 and deepest_on > -0.0005, (deepest_on, deepest_off)
     assert self_contact_pairs(spec, q_on, SELF_CONTACT_TOLERANCE_M) == [(-1, 1)]
+
+
+def _moment_with_torques(spec, q, tau_ext):
+    """A settled reading (planar: gravity along the joint axes) whose external torques are ``tau_ext``."""
+    reading = JointReading(t_s=0.0, q=np.asarray(q, float), dq=np.zeros(spec.n_links), tau=-np.asarray(tau_ext, float))
+    m = Moment(joint=1, step=1, still=True, reading=reading)
+    n = spec.n_links
+    return Attempt(T_world_base=np.eye(4), q=reading.q, q_ref=reading.q, contact=np.zeros(n, bool), reasons=(),
+                   detect_step=np.zeros(n, int), steps=1, moments=(m,))
+
+
+def test_a_contact_on_the_base_block_is_a_self_contact_and_never_hulled():
+    """Link 1 curled back onto the base block (geometry from the model: joint 1 turned until the
+    two meet), pressed by the block's face: the localiser finds a contact on link 1 there (a
+    force on the base block reaches no joint, so it reads like an object's) and marks it as the
+    arm touching itself; the same force on link 5, far from every other body, is the object's."""
+    spec = SMALL
+    q = np.zeros(spec.n_links)
+    q[0] = 1.9
+    lo, hi = 0.5, 2.0  # bisect joint 1 for the model distance link 1 - base block = 0
+    for _ in range(60):
+        q[1] = 0.5 * (lo + hi)
+        lo, hi = (q[1], hi) if self_distances(spec, q)[0, 2] > 0 else (lo, q[1])
+    assert abs(self_distances(spec, q)[0, 2]) < 1e-9
+    # the block's top back corner touches link 1's inner face; the block pushes the link off
+    b = spec.base_size
+    corner = np.array([-b - 0.001, b / 2, 0.0])
+    assert point_body_distances(spec, q, [corner])[0, 2] < 1e-9
+    from explore3d.kinematics import link_transforms
+
+    T1 = link_transforms(spec, q)[1]
+    p_link = (np.linalg.inv(T1) @ np.append(corner, 1.0))[:3]
+    assert p_link[1] == pytest.approx(spec.link_width / 2) and 0 < p_link[0] < spec.link_length
+    f_link = np.array([0.0, -2.0, 0.0])  # 2 N along the inner face's inward normal
+    tau = torques_of_contacts(spec, q, [(1, p_link, f_link)])
+    atts = [_moment_with_torques(spec, q, tau)]
+    cs = localise_attempts(spec, atts, np.array([0.0, 0.0, -9.81]), SensorConfig.ideal())
+    assert len(cs) == 1 and cs.link[0] == 1
+    # a face force and a corner force fit the two loaded joints alike: the touching point lies in
+    # the contact's profile interval, wherever the located point is
+    lo, hi = cs.along_interval_m[0]
+    assert lo - 1e-4 <= p_link[0] <= hi + 1e-4, (lo, p_link[0], hi)
+    assert cs.self_contact.tolist() == [True]
+    hulled = contacts_for_hull(cs, ExploreConfig(mode="planar", sensors=SensorConfig.ideal()), np.zeros(3), 0.3)
+    assert not hulled.used.any()
+    # the same force on link 5's inner face: not near another body
+    T5 = link_transforms(spec, q)[5]
+    tau5 = torques_of_contacts(spec, q, [(5, np.array([0.01, spec.link_width / 2, 0.0]), np.array([0.0, -2.0, 0.0]))])
+    cs5 = localise_attempts(spec, [_moment_with_torques(spec, q, tau5)], np.array([0.0, 0.0, -9.81]),
+                            SensorConfig.ideal())
+    assert cs5.link.tolist() == [5] and cs5.self_contact.tolist() == [False]
+    assert contacts_for_hull(cs5, ExploreConfig(mode="planar", sensors=SensorConfig.ideal()), T5[:3, 3], 0.3).used.all()
