@@ -343,23 +343,21 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
     return StopReason.TIMEOUT
 
 
-def retreat(ctl: Controller, k: int, q_ref: np.ndarray, speed: float, torque_limit: float,
-            clearance: float) -> np.ndarray:
+def retreat(ctl: Controller, k: int, q_ref: np.ndarray, speed: float, clearance: float) -> np.ndarray:
     """After a self-contact stopped joint ``k``'s sweep: hold the joints before it where they stand
-    and move joint ``k``'s reference back (in place in ``q_ref`` (n,), rad) at ``speed`` rad/s with
-    motor torque limit ``torque_limit`` N m until, by the arm's model at the sensed angles, every
-    body it carries is ``clearance`` metres from every body it does not (or the reference reaches
-    the lower limit); hold there and settle.  Returns the last reading's angles (n,), rad."""
+    and move joint ``k``'s reference back (in place in ``q_ref`` (n,), rad) at ``speed`` rad/s until,
+    by the arm's model at the sensed angles, every body it carries is ``clearance`` metres from
+    every body it does not (or the reference reaches the lower limit); hold there and settle.  Every
+    motor keeps its full torque (a step with a reduced limit is a sweep step, to the replay).
+    Returns the last reading's angles (n,), rad."""
     spec, dt = ctl.spec, ctl.robot.dt
     q = ctl.reading.q
     q_ref[: k + 1] = q[: k + 1]
-    limits = ctl.full.copy()
-    limits[k] = torque_limit
     for _ in range(ctl.cfg.max_sweep_steps):
         if q_ref[k] <= spec.joint_lower or not self_contact_pairs(spec, ctl.reading.q, clearance, moving_from=k):
             break
         q_ref[k] = max(spec.joint_lower, q_ref[k] - speed * dt)
-        ctl.send(q_ref, None, limits)
+        ctl.send(q_ref)
     _, reading = ctl.settle(q_ref)
     return reading.q
 
@@ -402,7 +400,7 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
         if reason is StopReason.CONTACT and self_contact_pairs(spec, q, cfg.self_contact_tolerance, moving_from=k):
             reason = StopReason.SELF
         if reason is StopReason.SELF:
-            q = retreat(ctl, k, q_ref, speeds[k], sweep_torques[k], 2.0 * cfg.self_contact_tolerance)
+            q = retreat(ctl, k, q_ref, speeds[k], 2.0 * cfg.self_contact_tolerance)
         elif reason is StopReason.CONTACT:
             contact[k] = True
             contact_step[k] = ctl.steps
