@@ -17,6 +17,7 @@ object poses (a test runs a whole exploration with those PyBullet functions remo
 """
 from __future__ import annotations
 
+import collections
 import enum
 import math
 from dataclasses import dataclass
@@ -29,6 +30,14 @@ from .detect import ContactBand, SweepDetector
 from .kinematics import gravity_torques
 from .robot import JointCommand, JointReading, Robot
 from .selfcontact import SELF_CONTACT_TOLERANCE_M, self_contact_pairs
+
+
+#: A detection is a self-contact when any of the sweep's last this many readings put a carried body
+#: against one the joint does not carry (the detector's two-step mean, the sensing delay and a
+#: collision's rebound fit inside).  Measured on a planar wrap of the cube: the tip link slid along
+#: the base block, touching it for several steps (model distance -0.2 to +0.1 mm), then flipped
+#: 0.4 rad away within one step; the detection's own reading put it 4 mm from the block.
+SELF_CONTACT_WINDOW_STEPS = 8
 
 
 class StopReason(enum.Enum):
@@ -103,7 +112,8 @@ class ControlConfig:
             (still_steps dt)``, which bounds the chain's unmodelled inertial torques.
         max_sweep_steps: safety cap on the steps of one joint's sweep.
         self_contact_tolerance: a detection is the arm touching itself, not the object, when by
-            the arm's own model at the sensed angles a body the swept joint k carries (link k and
+            the arm's own model at the sensed angles of any of the sweep's last
+            :data:`SELF_CONTACT_WINDOW_STEPS` readings a body the swept joint k carries (link k and
             beyond) is within this distance, m, of one it does not (the base block, links before
             k; non-adjacent pairs only, :func:`explore3d.selfcontact.self_contact_pairs`): the
             pairs the sweep moved together (the carried chain is straight, the held one did not
@@ -256,6 +266,7 @@ class Controller:
         self.full = np.array(self.spec.joint_torques())
         self.zero = np.zeros(self.spec.n_links)
         self.reading: JointReading | None = None
+        self.sweep_q: collections.deque = collections.deque(maxlen=SELF_CONTACT_WINDOW_STEPS)  # the sweep's last angles
         self.steps = 0
         self.traj, self.traj_ref = ([], []) if record else (None, None)
 
@@ -320,6 +331,7 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
     limits = ctl.full.copy()
     limits[k] = torque_limit
     det = SweepDetector(k, q_ref, ctl.reading.q, cfg.watch_held)
+    ctl.sweep_q.clear()
     for i in range(cfg.max_sweep_steps):
         # speed ramps up from rest and down again before the stop angle (no false alarm there)
         w = min(_ramp_speed(speed, cfg.ramp_time, i * dt),
@@ -329,6 +341,7 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
         q_ref[k] = min(stop, q_ref[k] + w * dt)
         dq_ref[k] = w if q_ref[k] < stop else 0.0
         q = ctl.send(q_ref, dq_ref, limits)
+        ctl.sweep_q.append(q)
         if ctl.traj is not None:
             ctl.traj.append(q)
             ctl.traj_ref.append(q_ref.copy())
@@ -397,7 +410,8 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
         stop = min(upper, base_stop) if base else upper
         reason = sweep_joint(ctl, k, q_ref, stop, band, speeds[k], sweep_torques[k], base, observer)
         q = ctl.reading.q
-        if reason is StopReason.CONTACT and self_contact_pairs(spec, q, cfg.self_contact_tolerance, moving_from=k):
+        if reason is StopReason.CONTACT and any(self_contact_pairs(spec, qs, cfg.self_contact_tolerance, moving_from=k)
+                                                for qs in ctl.sweep_q):
             reason = StopReason.SELF
         if reason is StopReason.SELF:
             q = retreat(ctl, k, q_ref, speeds[k], 2.0 * cfg.self_contact_tolerance)
