@@ -50,13 +50,16 @@ class SimConfig:
         self_collision: the arm collides with itself (PyBullet's ``URDF_USE_SELF_COLLISION``):
             a link with every other link and with the base block, except the bodies a joint
             connects (link i with link i + 1, link 0 with the base), whose boxes meet at the joint
-            and overlap on the inner side of a bent joint at every angle.  PyBullet excludes
+            and overlap on the inner side of a bent joint at every angle (by the model: 5.7 mm at
+            the upper limit, 1.9 mm at the lower; link 0 and the base block 7.3 and 0.9 mm; with
+            ``URDF_USE_SELF_COLLISION_INCLUDE_PARENT`` PyBullet reports every neighbouring pair
+            touching even with the arm straight).  PyBullet excludes
             those parent-child pairs by default (``URDF_USE_SELF_COLLISION_EXCLUDE_PARENT`` adds
             nothing: measured, the same pairs collide with and without it; only
             ``URDF_USE_SELF_COLLISION_INCLUDE_PARENT`` would collide them).  A link's grandparent
             is not excluded: with two neighbouring joints near the upper limit link i + 2 folds
-            into link i (measured: both joints at 2 rad overlap them by 3.6 mm), which a real arm
-            of these boxes would feel.  The exploration tells such a touch from the object's by
+            into link i (default arm: they touch from 1.9 rad on both joints; at 2 rad PyBullet and
+            the model overlap them by 3.6 mm), which a real arm of these boxes would feel.  The exploration tells such a touch from the object's by
             the arm's own kinematics (:mod:`explore3d.selfcontact`).  False: links pass through
             each other (the behaviour before self-collision existed).
     """

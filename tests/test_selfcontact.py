@@ -203,3 +203,43 @@ def test_a_contact_on_the_base_block_is_a_self_contact_and_never_hulled():
                             SensorConfig.ideal())
     assert cs5.link.tolist() == [5] and cs5.self_contact.tolist() == [False]
     assert contacts_for_hull(cs5, ExploreConfig(mode="planar", sensors=SensorConfig.ideal()), T5[:3, 3], 0.3).used.all()
+
+
+def test_band_calibration_learns_no_signal_of_the_arm_touching_itself(monkeypatch):
+    """The impact wraps of the calibration curl the 16-link arm round the known block until it
+    touches itself (PyBullet reports arm-arm contacts); no step at which it does feeds a band."""
+    from explore3d import band as band_mod
+    from explore3d import sim as sim_mod
+
+    spec = ArmSpec(name="small16", n_links=16, link_length=0.02)
+    worlds = []
+    init = sim_mod.ArmSimulation.__init__
+
+    def keep(self, *a, **k):
+        init(self, *a, **k)
+        worlds.append(self)
+
+    monkeypatch.setattr(sim_mod.ArmSimulation, "__init__", keep)
+    recorded = {"steps": 0, "touching_itself": 0, "seen_touching": 0}
+    add = band_mod._Maxima.add
+
+    def checked_add(self, k, lag, sig):
+        w = worlds[-1]
+        recorded["steps"] += 1
+        recorded["touching_itself"] += any(c[8] < 1e-4 for c in w.client.getContactPoints(w.arm, w.arm))
+        add(self, k, lag, sig)
+
+    monkeypatch.setattr(band_mod._Maxima, "add", checked_add)
+    # count the steps at which the arm touches itself at all (observer calls see every sweep step)
+    exceeds = band_mod.SweepDetector.exceeds
+
+    def watching_exceeds(band, k, lag, sig):
+        w = worlds[-1]
+        recorded["seen_touching"] += any(c[8] < 1e-4 for c in w.client.getContactPoints(w.arm, w.arm))
+        return exceeds(band, k, lag, sig)
+
+    monkeypatch.setattr(band_mod.SweepDetector, "exceeds", staticmethod(watching_exceeds))
+    b = band_mod.calibrate_band(spec, planar=True)
+    assert recorded["steps"] > 1000 and recorded["touching_itself"] == 0, recorded
+    assert recorded["seen_touching"] > 0, recorded  # the arm did touch itself in the calibration
+    assert sum(p["self_contacts"] for p in b.provenance["impact_passes"]) > 0
