@@ -29,7 +29,7 @@ from .arm import ArmSpec
 from .detect import ContactBand, SweepDetector
 from .kinematics import gravity_torques
 from .robot import JointCommand, JointReading, Robot
-from .selfcontact import SELF_CONTACT_TOLERANCE_M, self_contact_pairs
+from .selfcontact import SELF_CONTACT_TOLERANCE_M, self_contact_pairs, self_distances
 
 
 #: A detection is a self-contact when any of the sweep's last this many readings put a carried body
@@ -118,9 +118,10 @@ class ControlConfig:
             k; non-adjacent pairs only, :func:`explore3d.selfcontact.self_contact_pairs`): the
             pairs the sweep moved together (the carried chain is straight, the held one did not
             move).  The sweep then ends like one at the joint's limit (:attr:`StopReason.SELF`):
-            no contact and no settled reading are recorded; the joints before k are held where
-            they stand, joint k backs off until the model parts the bodies by twice this
-            (:func:`retreat`), the arm settles, the next joint sweeps.  Backing off matters:
+            no contact and no settled reading are recorded; the joints up to k are held where
+            they stand, the joint nearest the touch that can part the bodies backs off until the
+            model parts them by twice this (:func:`retreat`), the arm settles, the next joint
+            sweeps.  Backing off matters:
             measured in free space, a chain held pressing against itself chattered and the next
             sweeps detected at once (5 false contacts in one attempt of the default arm).
             Default 1 mm: measured on 12 wraps of the 80 mm cube (default 3D setting), every
@@ -356,20 +357,42 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
     return StopReason.TIMEOUT
 
 
-def retreat(ctl: Controller, k: int, q_ref: np.ndarray, speed: float, clearance: float) -> np.ndarray:
-    """After a self-contact stopped joint ``k``'s sweep: hold the joints before it where they stand
-    and move joint ``k``'s reference back (in place in ``q_ref`` (n,), rad) at ``speed`` rad/s until,
-    by the arm's model at the sensed angles, every body it carries is ``clearance`` metres from
-    every body it does not (or the reference reaches the lower limit); hold there and settle.  Every
-    motor keeps its full torque (a step with a reduced limit is a sweep step, to the replay).
-    Returns the last reading's angles (n,), rad."""
+def retreat_joint(spec: ArmSpec, q, k: int, clearance: float, step: float = 0.02) -> int:
+    """The joint to back off after a self-contact stopped joint ``k``'s sweep at angles ``q`` (n,),
+    rad: the most distal joint whose turning back towards its lower limit parts, by the model,
+    every carried body from every body joint ``k`` does not carry by ``clearance`` metres (tried in
+    steps of ``step`` rad), from the touching carried link nearest joint ``k`` down to ``k``; ``k``
+    if none does.  Backing off next to the touch leaves the links between joint ``k`` and the touch
+    where they lie (on the object)."""
+    q = np.asarray(q, dtype=np.float64)
+    pairs = self_contact_pairs(spec, q, clearance, moving_from=k)
+    if not pairs:
+        return k
+    for r in range(min(b for _, b in pairs), k - 1, -1):
+        angles = np.arange(q[r], spec.joint_lower - step, -step)
+        Q = np.repeat(q[None, :], len(angles), axis=0)
+        Q[:, r] = np.maximum(angles, spec.joint_lower)
+        if (self_distances(spec, Q)[:, : k + 1, k + 1:].min(axis=(1, 2)) >= clearance).any():
+            return r
+    return k
+
+
+def retreat(ctl: Controller, k: int, q_ref: np.ndarray, speeds: np.ndarray, clearance: float) -> np.ndarray:
+    """After a self-contact stopped joint ``k``'s sweep: hold the joints up to ``k`` where they stand
+    and move the reference of the joint :func:`retreat_joint` chooses back (in place in ``q_ref``
+    (n,), rad) at its sweep speed (``speeds`` (n,), rad/s) until, by the arm's model at the sensed
+    angles, every body joint ``k`` carries is ``clearance`` metres from every body it does not (or
+    the reference reaches the lower limit); hold there and settle.  Every motor keeps its full
+    torque (a step with a reduced limit is a sweep step, to the replay).  Returns the last
+    reading's angles (n,), rad."""
     spec, dt = ctl.spec, ctl.robot.dt
     q = ctl.reading.q
     q_ref[: k + 1] = q[: k + 1]
+    r = retreat_joint(spec, q, k, clearance)
     for _ in range(ctl.cfg.max_sweep_steps):
-        if q_ref[k] <= spec.joint_lower or not self_contact_pairs(spec, ctl.reading.q, clearance, moving_from=k):
+        if q_ref[r] <= spec.joint_lower or not self_contact_pairs(spec, ctl.reading.q, clearance, moving_from=k):
             break
-        q_ref[k] = max(spec.joint_lower, q_ref[k] - speed * dt)
+        q_ref[r] = max(spec.joint_lower, q_ref[r] - speeds[r] * dt)
         ctl.send(q_ref)
     _, reading = ctl.settle(q_ref)
     return reading.q
@@ -414,7 +437,7 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
                                                 for qs in ctl.sweep_q):
             reason = StopReason.SELF
         if reason is StopReason.SELF:
-            q = retreat(ctl, k, q_ref, speeds[k], 2.0 * cfg.self_contact_tolerance)
+            q = retreat(ctl, k, q_ref, speeds, 2.0 * cfg.self_contact_tolerance)
         elif reason is StopReason.CONTACT:
             contact[k] = True
             contact_step[k] = ctl.steps
