@@ -45,10 +45,10 @@ BASE = -1
 #: How close, metres, two non-adjacent bodies may be by the model at the sensed angles and still be
 #: counted as touching each other (the default of ``ControlConfig.self_contact_tolerance`` and of
 #: the localisation's test, :func:`explore3d.contacts.on_the_arm`).  Measured on 12 wraps of the
-#: 80 mm cube (default 3D setting and sensing): at the 56 detections where PyBullet reported an
-#: arm-arm contact, the model put the touching pair at most 0.37 mm apart (the model's sharp boxes
-#: are never farther apart than PyBullet's rounded ones; the sensed angles are one step late and
-#: quantised to 1.5 mrad).
+#: 80 mm cube (default 3D setting and sensing): at the detections where PyBullet reported an
+#: arm-arm contact (56 and 43 with two versions of the controller), the model put the touching pair
+#: at most 0.37 mm apart (the model's sharp boxes are never farther apart than PyBullet's rounded
+#: ones; the sensed angles are one step late and quantised to 1.5 mrad).
 SELF_CONTACT_TOLERANCE_M = 1.0e-3
 
 
