@@ -28,6 +28,10 @@ from ._validate import check_positive
 #: Standard gravity, m/s^2 (used to size motor torques).
 GRAVITY_M_S2 = 9.81
 
+#: The base block's front face stands this far behind joint 0, metres (the block spans x in
+#: [-BASE_GAP_M - base_size, -BASE_GAP_M] of the base frame, y and z in [-base_size/2, base_size/2]).
+BASE_GAP_M = 1.0e-3
+
 @dataclass(frozen=True)
 class ArmSpec:
     """A chain of ``n_links`` identical box links (SI units).
@@ -44,7 +48,8 @@ class ArmSpec:
         max_torque: motor torque limit of the most distal joint, N m.  Proximal joints get this
             plus what they need to hold the distal chain against gravity in any orientation
             (see :meth:`joint_torques`).
-        base_size: edge of the cubic base block, metres (the base block sits behind joint 0).
+        base_size: edge of the cubic base block, metres (the base block sits behind joint 0,
+            :data:`BASE_GAP_M` from it).
     """
 
     name: str = "default"

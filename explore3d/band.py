@@ -8,13 +8,20 @@ the detector's signals (:mod:`explore3d.detect`) get when nothing new is touched
    orientations that bound gravity's effect: the arm's plane horizontal (gravity along the joint
    axes), and vertical with the curl upwards and downwards (gravity in the plane; a sweep then
    passes through every angle to gravity).  Planar explorations use the horizontal plane only.
-   Sensing is the run's own (noise, quantisation, delay).
+   Sensing is the run's own (noise, quantisation, delay).  A step at which the arm's model puts
+   two of its own non-adjacent bodies within :func:`self_contact_tolerance_m` of each other (the
+   arm touching itself, :mod:`explore3d.selfcontact`) is not free motion and is not recorded
+   (counted in ``provenance["free_self_contact_steps"]``; measured: a single bent joint of the
+   built-in arms never brings two bodies that close, the count is 0).
 2. **Impacts** on a known calibration object (the 60 mm ball of
    :func:`explore3d.calibration.calibration_sphere`, never the object under test): full attempts
    from a few wrap poses around it.  A link held against the ball, or struck by it, shakes the rest
    of the chain; a sweep step counts as *contact-free* when, by the arm's own model at the sensed
    angles, the swept link and every distal link are farther than :func:`contact_tolerance_m` from
-   the known ball.  The signals of contact-free steps are what an impact does to the other joints.
+   the known ball and no two non-adjacent bodies of the arm are within
+   :func:`self_contact_tolerance_m` of each other (a chain curled round the object can touch
+   itself: contact, not noise; such steps are counted per pass in ``"self_contact_steps"``, the
+   sweeps the controller ended as self-contacts in ``"self_contacts"``).  The signals of contact-free steps are what an impact does to the other joints.
    In the *measure* pass a contact-free step never ends a sweep (the known object says nothing
    was touched) and its signals are recorded; near the ball the detector, with the bands measured
    so far, decides, so the chain presses and holds as it will in a run.  A *verify* pass then
@@ -43,17 +50,20 @@ from .arm import ArmSpec
 from .detect import ContactBand, SweepDetector
 from .encircle import Controller, ControlConfig, StopReason, run_attempt, sweep_joint, sweep_speeds, sweep_torque_limits
 from .kinematics import link_transforms
+from .selfcontact import self_contact_pairs
 from .sensing import SensorConfig
 from .sim import ArmSimulation, SimConfig
 
-__all__ = ["calibrate_band", "cached_band", "contact_tolerance_m", "box_sphere_distance", "BAND_PROTOCOL_VERSION",
+__all__ = ["calibrate_band", "cached_band", "contact_tolerance_m", "self_contact_tolerance_m", "box_sphere_distance",
+           "BAND_PROTOCOL_VERSION",
            "gravity_bounding_bases"]
 
 log = logging.getLogger(__name__)
 
 #: Bumped whenever the calibration procedure or the controller it runs changes (old cache entries
-#: are then ignored).  4: the pressing settle after each contact (explore3d.encircle).
-BAND_PROTOCOL_VERSION = 4
+#: are then ignored).  4: the pressing settle after each contact (explore3d.encircle).  5: the arm
+#: collides with itself; self-contacts end sweeps (StopReason.SELF) and are not contact-free steps.
+BAND_PROTOCOL_VERSION = 5
 
 #: Wrap poses of the impact phase: 3D, plane normals through the ball's centre (one approach each).
 IMPACT_NORMALS_3D = 6
@@ -154,6 +164,15 @@ def contact_tolerance_m(spec: ArmSpec, control: ControlConfig, sim: SimConfig, s
     return margin + moving + quant
 
 
+def self_contact_tolerance_m(spec: ArmSpec, control: ControlConfig, sim: SimConfig, sensors: SensorConfig) -> float:
+    """How close, metres, two non-adjacent bodies of the arm may be by the model at the sensed
+    angles for a calibration step to count as the arm touching itself: :func:`contact_tolerance_m`
+    (the model's sharp boxes are never farther apart than PyBullet's rounded ones, so its contact
+    margin is a generous allowance; the motion during the sensing delay and the encoders'
+    resolution apply alike), and at least the controller's own ``self_contact_tolerance``."""
+    return max(contact_tolerance_m(spec, control, sim, sensors), control.self_contact_tolerance)
+
+
 class _Maxima:
     """Running per-joint maxima of the contact-free signals (and how many steps of each joint's
     sweeps were seen)."""
@@ -169,11 +188,18 @@ class _Maxima:
         np.maximum(self.other, np.abs(sig), out=self.other)
 
 
-def _free_motion(robot, spec: ArmSpec, control: ControlConfig, bases) -> _Maxima:
+def _free_motion(robot, spec: ArmSpec, control: ControlConfig, bases, self_tol: float) -> tuple[_Maxima, np.ndarray]:
+    """The free sweeps' maxima, and per joint the steps left out as self-contacts."""
     mx = _Maxima(spec.n_links)
+    self_steps = np.zeros(spec.n_links, dtype=int)
     upper = spec.joint_upper - control.limit_margin
     speeds, torques = sweep_speeds(spec, control), sweep_torque_limits(spec, control)
-    observe = lambda k, reading, lag, sig: mx.add(k, lag, sig)
+
+    def observe(k, reading, lag, sig):
+        if self_contact_pairs(spec, reading.q, self_tol):
+            self_steps[k] += 1
+        else:
+            mx.add(k, lag, sig)
     for T in bases:
         for k in range(spec.n_links):
             ctl = Controller(robot, control, T, record=False)
@@ -182,7 +208,7 @@ def _free_motion(robot, spec: ArmSpec, control: ControlConfig, bases) -> _Maxima
             reason = sweep_joint(ctl, k, np.zeros(spec.n_links), upper, None, speeds[k], torques[k], observer=observe)
             if reason is not StopReason.LIMIT:
                 raise RuntimeError(f"band calibration: joint {k}'s free sweep ended by {reason.value}, not at its limit")
-    return mx
+    return mx, self_steps
 
 
 def _impact_poses(spec: ArmSpec, centre, radius: float, planar: bool):
@@ -204,10 +230,11 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
     t0 = time.perf_counter()
     n = spec.n_links
     bases = [np.eye(4)] if planar else gravity_bounding_bases()
+    self_tol = self_contact_tolerance_m(spec, control, sim, sensors)
     with ArmSimulation(spec, config=sim) as world:
         robot = world.robot(sensors)
         robot.reseed((1,))  # streams: (0, wrap) exploration, (1,) free motion, (2, pass, object, wrap) impacts
-        free = _free_motion(robot, spec, control, bases)
+        free, free_self_steps = _free_motion(robot, spec, control, bases, self_tol)
     T_block = calibration_block_pose()
     objects = [  # (name, mesh, rough radius for the wrap poses, distance of link boxes to it)
         (f"sphere r={CALIBRATION_SPHERE_RADIUS_M * 1000:.0f} mm", calibration_sphere(), CALIBRATION_SPHERE_RADIUS_M,
@@ -231,10 +258,13 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
     for name in ("measure", "verify"):
         band = running_band()
         for oi, (label, mesh, radius, distance) in enumerate(objects):
-            counts = {"pass": name, "object": label, "contacts": 0, "false_detections": 0}
+            counts = {"pass": name, "object": label, "contacts": 0, "false_detections": 0, "self_contacts": 0,
+                      "self_contact_steps": 0}
 
             def observe(k, reading, lag, sig):
-                if distance(link_transforms(spec, reading.q, observe.T)[k:]).min() <= tol:
+                touching_itself = bool(self_contact_pairs(spec, reading.q, self_tol))
+                counts["self_contact_steps"] += touching_itself
+                if touching_itself or distance(link_transforms(spec, reading.q, observe.T)[k:]).min() <= tol:
                     return SweepDetector.exceeds(running_band() if name == "measure" else band, k, lag, sig)
                 if name == "measure":
                     impact.add(k, lag, sig)
@@ -249,8 +279,9 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
                 for i, pose in enumerate(poses):
                     robot.reseed((2, len(passes), oi, i))
                     observe.T = pose.T_world_base
-                    counts["contacts"] += int(run_attempt(robot, pose.T_world_base, band, control,
-                                                          observer=observe).contact.sum())
+                    att = run_attempt(robot, pose.T_world_base, band, control, observer=observe)
+                    counts["contacts"] += int(att.contact.sum())
+                    counts["self_contacts"] += sum(r is StopReason.SELF for r in att.reasons)
             passes.append(counts)
     swept = np.maximum(free.swept, impact.swept)
     other = np.maximum(free.other, impact.other)
@@ -261,9 +292,11 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
         "band_factor": control.band_factor,
         "free_motion_bases": len(bases),
         "free_swept_max_rad": free.swept.tolist(), "free_other_max_rad": free.other.tolist(),
-        "free_sweep_steps": free.steps.tolist(), "impact_contact_free_steps": impact.steps.tolist(),
+        "free_sweep_steps": free.steps.tolist(), "free_self_contact_steps": free_self_steps.tolist(),
+        "impact_contact_free_steps": impact.steps.tolist(),
         "impact_swept_max_rad": impact.swept.tolist(), "impact_other_max_rad": impact.other.tolist(),
         "impact_wraps": n_wraps, "impact_passes": passes, "contact_tolerance_m": tol,
+        "self_contact_tolerance_m": self_tol,
         "calibration_objects": [o[0] for o in objects],
         "wall_s": time.perf_counter() - t0,
     }

@@ -4,8 +4,10 @@ touched, with the force, the normal and the uncertainty (pure numpy on the robot
 Every detected contact of an attempt ends with a settled reading (:class:`explore3d.encircle.Moment`:
 joint angles and motor torques once the arm is still).  :func:`localise_moment` turns one into
 contacts with :func:`explore3d.localise.localise`; :func:`localise_attempts` does every moment of
-an exploration and gathers them into a :class:`ContactSet`; :func:`contacts_for_hull` chooses the
-certain ones and, in 3D, their height across the link (:func:`resolve_heights`).  Nothing here
+an exploration and gathers them into a :class:`ContactSet`, marking those that lie on the arm
+itself (a curled chain touching itself, :mod:`explore3d.selfcontact`); :func:`contacts_for_hull`
+chooses the certain ones on the object and, in 3D, their height across the link
+(:func:`resolve_heights`).  Nothing here
 reads the simulator:
 only the readings, the arm's model, the known base pose, gravity and the sensing's datasheet
 figures (its torque noise and resolution, its encoder's counts).
@@ -19,9 +21,10 @@ import numpy as np
 
 from .arm import ArmSpec
 from .localise import Localisation, external_torques, localise
+from .selfcontact import near_other_body
 from .sensing import SensorConfig
 
-__all__ = ["ContactSet", "localise_moment", "localise_attempts", "torque_sigma_nm", "position_sigma_m",
+__all__ = ["ContactSet", "localise_moment", "localise_attempts", "on_the_arm", "torque_sigma_nm", "position_sigma_m",
            "contact_uncertainty_m", "resolve_heights", "contacts_for_hull", "MODEL_TORQUE_SIGMA_NM",
            "MAX_UNCERTAINTY_M", "MAX_RESIDUAL_SIGMAS", "JUDGE_A"]
 
@@ -68,6 +71,10 @@ class ContactSet:
             (:func:`contact_uncertainty_m`; NaN until :func:`contacts_for_hull` sets it).
         used: (m,) bool: the contact is in the hull input (:func:`contacts_for_hull`: its
             uncertainty is within the bound; all False until then).
+        self_contact: (m,) bool: the arm touching itself, not the object: by the arm's model at
+            the reading's angles the contact (its point or its profile interval) lies within
+            :data:`~explore3d.selfcontact.SELF_CONTACT_TOLERANCE_M` of a body of the arm other than
+            its link and the two adjacent to it (:func:`on_the_arm`).  Never used for the hull.
     """
 
     points: np.ndarray
@@ -85,6 +92,7 @@ class ContactSet:
     residual_nm: np.ndarray = None
     uncertainty_m: np.ndarray = None
     used: np.ndarray = None
+    self_contact: np.ndarray = None
 
     def __post_init__(self):
         m = len(self.points)
@@ -94,6 +102,8 @@ class ContactSet:
             object.__setattr__(self, "uncertainty_m", np.full(m, np.nan))
         if self.used is None:
             object.__setattr__(self, "used", np.zeros(m, dtype=bool))
+        if self.self_contact is None:
+            object.__setattr__(self, "self_contact", np.zeros(m, dtype=bool))
 
     def __len__(self) -> int:
         return len(self.points)
@@ -103,7 +113,7 @@ class ContactSet:
         z = np.zeros(0, dtype=int)
         return cls(np.zeros((0, 3)), np.zeros((0, 2, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0),
                    np.zeros((0, 2)), z, z, z, z, np.zeros(0, dtype="<U16"), np.zeros(0, dtype=bool),
-                   np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool))
+                   np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool), np.zeros(0, dtype=bool))
 
     @classmethod
     def concatenate(cls, sets) -> "ContactSet":
@@ -126,15 +136,51 @@ def localise_moment(spec: ArmSpec, moment, T_world_base, gravity, sensors: Senso
                     position_sigma_m=position_sigma_m(spec, sensors))
 
 
+#: Points sampled along a contact's profile interval when testing it against the arm's other bodies.
+SELF_CONTACT_SAMPLES = 9
+
+
+def on_the_arm(spec: ArmSpec, q, T_world_base, contacts) -> np.ndarray:
+    """(m,) bool: each localised contact (:class:`~explore3d.localise.LocalContact`, at joint angles
+    ``q`` (n,), rad, base pose ``T_world_base`` (4, 4)) may be the arm touching itself: its point,
+    or a point of its inner face anywhere in its profile interval (the positions along the link
+    that explain the torques as well, :attr:`~explore3d.localise.LocalContact.along_interval_m`),
+    lies within :data:`~explore3d.selfcontact.SELF_CONTACT_TOLERANCE_M` of a body of the arm
+    other than its link and the two adjacent to it.  The interval matters: with the torques of
+    only the joints up to the touched link, a face point and a corner fit alike, and the located
+    point may lie millimetres from where the other body touches."""
+    from .kinematics import link_transforms
+
+    T = link_transforms(spec, q, T_world_base)
+    w = spec.link_width / 2
+    points, links, owner = [], [], []
+    for i, c in enumerate(contacts):
+        pts = [np.asarray(c.point_link, float)]
+        lo, hi = c.along_interval_m
+        if np.isfinite(lo) and np.isfinite(hi):
+            pts += [np.array([x, w, 0.0]) for x in np.linspace(lo, hi, SELF_CONTACT_SAMPLES)]
+        Tl = T[c.link]
+        points += [Tl[:3, :3] @ p + Tl[:3, 3] for p in pts]
+        links += [c.link] * len(pts)
+        owner += [i] * len(pts)
+    out = np.zeros(len(contacts), dtype=bool)
+    if points:
+        np.logical_or.at(out, np.array(owner), near_other_body(spec, q, links, points, T_world_base))
+    return out
+
+
 def localise_attempts(spec: ArmSpec, attempts, gravity, sensors: SensorConfig, wrap: int = 0) -> ContactSet:
     """Localise every moment of one wrap's ``attempts`` (see :func:`localise_moment`); ``wrap``
-    labels them."""
+    labels them.  Contacts that lie on the arm itself are marked (:attr:`ContactSet.self_contact`)."""
     rows = []
     for ai, att in enumerate(attempts):
         for m in att.moments:
             loc = localise_moment(spec, m, att.T_world_base, gravity, sensors)
-            for c in loc.contacts:
-                rows.append((c, ai, m, loc.residual_nm))
+            if not loc.contacts:
+                continue
+            on_arm = on_the_arm(spec, m.reading.q, att.T_world_base, loc.contacts)
+            for c, s in zip(loc.contacts, on_arm):
+                rows.append((c, ai, m, loc.residual_nm, bool(s)))
     if not rows:
         return ContactSet.empty()
     cs = [r[0] for r in rows]
@@ -152,6 +198,7 @@ def localise_attempts(spec: ArmSpec, attempts, gravity, sensors: SensorConfig, w
         kind=np.array([c.kind for c in cs], dtype="<U16"),
         still=np.array([r[2].still for r in rows], bool),
         residual_nm=np.array([r[3] for r in rows], float),
+        self_contact=np.array([r[4] for r in rows], bool),
     )
 
 
@@ -262,7 +309,8 @@ def contacts_for_hull(cs: ContactSet, config, centre, radius: float, plane=None,
     ``config``, an :class:`~explore3d.explore.ExploreConfig`) from still readings (the static
     model holds; measured on the default 3D runs of the box and the cube, 10 of the 13 contacts
     placed more than 3 mm off came from readings whose settle ran out) that their fit explains
-    (:data:`MAX_RESIDUAL_SIGMAS`); in 3D their ``points`` are moved
+    (:data:`MAX_RESIDUAL_SIGMAS`) and that are not the arm touching itself
+    (:attr:`ContactSet.self_contact`); in 3D their ``points`` are moved
     across the link's height by :func:`resolve_heights` (planar: the mid-height points, the
     plane's section).  The rough ``centre`` (3,) and ``radius`` (m) bound the estimate;
     ``plane`` (n_wraps,) int gives each wrap's plane (None: a plane per wrap)."""
@@ -270,7 +318,7 @@ def contacts_for_hull(cs: ContactSet, config, centre, radius: float, plane=None,
 
     sigma = torque_sigma_nm(config.sensors)
     u = contact_uncertainty_m(cs, sigma)
-    used = (u <= max_uncertainty_m) & (cs.residual_nm <= MAX_RESIDUAL_SIGMAS * sigma) & cs.still
+    used = (u <= max_uncertainty_m) & (cs.residual_nm <= MAX_RESIDUAL_SIGMAS * sigma) & cs.still & ~cs.self_contact
     points = cs.points.copy()
     if config.mode != "planar" and used.any():
         group = None if plane is None else np.asarray(plane)[cs.wrap[used]]

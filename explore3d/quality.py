@@ -43,15 +43,17 @@ def swept_joints(trajectory_ref) -> np.ndarray:
     """(t,) int: the joint swept at each recorded step, from the references (t, n), rad.
 
     During joint k's sweep only reference k moves (it increases every step); at the first step of
-    a sweep the previous joint's reference also jumps to its hold angle.  So the swept joint is
-    the highest-numbered joint whose reference changed since the previous step (all references
-    start at 0); a step where none changed keeps the previous joint.
+    a sweep the previous joint's reference also jumps to its hold angle, and after a self-contact
+    a joint beyond it may have been turned back (:func:`explore3d.encircle.retreat`, between
+    recorded steps).  So the swept joint is the highest-numbered joint whose reference increased
+    since the previous step (all references start at 0); a step where none did keeps the previous
+    joint.
     """
     R = np.asarray(trajectory_ref, dtype=np.float64)
     if R.ndim != 2:
         raise ValueError(f"trajectory_ref must have shape (t, n); got {R.shape}")
     prev = np.vstack([np.zeros((1, R.shape[1])), R[:-1]])
-    changed = R != prev
+    changed = R > prev
     n = R.shape[1]
     last = np.where(changed.any(axis=1), n - 1 - np.argmax(changed[:, ::-1], axis=1), -1)
     sw = np.maximum.accumulate(np.maximum(last, 0)) if len(last) else last

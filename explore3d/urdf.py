@@ -9,7 +9,7 @@ import json
 import re
 from pathlib import Path
 
-from .arm import ArmSpec
+from .arm import BASE_GAP_M, ArmSpec
 
 _SPEC_TAG = "explore3d-arm-spec:"
 
@@ -38,9 +38,9 @@ def arm_urdf(spec: ArmSpec) -> str:
         '  <link name="base">',
         '    <inertial><origin xyz="0 0 0"/><mass value="1.0"/>'
         '<inertia ixx="1e-3" ixy="0" ixz="0" iyy="1e-3" iyz="0" izz="1e-3"/></inertial>',
-        f'    <visual><origin xyz="{-b / 2 - 1e-3:.6g} 0 0"/><geometry><box size="{b:.6g} {b:.6g} {b:.6g}"/></geometry>'
+        f'    <visual><origin xyz="{-b / 2 - BASE_GAP_M:.6g} 0 0"/><geometry><box size="{b:.6g} {b:.6g} {b:.6g}"/></geometry>'
         '<material name="base"/></visual>',
-        f'    <collision><origin xyz="{-b / 2 - 1e-3:.6g} 0 0"/><geometry><box size="{b:.6g} {b:.6g} {b:.6g}"/></geometry></collision>',
+        f'    <collision><origin xyz="{-b / 2 - BASE_GAP_M:.6g} 0 0"/><geometry><box size="{b:.6g} {b:.6g} {b:.6g}"/></geometry></collision>',
         "  </link>",
     ]
     for i in range(spec.n_links):

@@ -172,6 +172,6 @@ def test_contacts_for_hull_keeps_what_is_certain():
     cfg = ExploreConfig(mode="planar")
     out = contacts_for_hull(cs, cfg, np.zeros(3), 0.3)
     sigma = torque_sigma_nm(cfg.sensors)
-    expect = (contact_uncertainty_m(cs, sigma) <= 0.5e-3) & (cs.residual_nm <= 2 * sigma) & cs.still
+    expect = (contact_uncertainty_m(cs, sigma) <= 0.5e-3) & (cs.residual_nm <= 2 * sigma) & cs.still & ~cs.self_contact
     np.testing.assert_array_equal(out.used, expect)
     np.testing.assert_array_equal(out.points, cs.points)  # planar: no height to resolve

@@ -8,6 +8,9 @@ from explore3d.encircle import ControlConfig, StopReason, run_wrap
 from explore3d.explore import ExploreConfig, explore, rough_bound
 from explore3d.objects import cube, square
 from explore3d.pipeline import reconstruct_exploration
+from explore3d.contacts import localise_attempts
+from explore3d.robot import ForwardingRobot
+from explore3d.sensing import SensorConfig
 from explore3d.sim import ArmSimulation
 
 #: A small arm (16 x 20 mm) keeps these tests fast; full-size runs live in scripts/ and BENCHMARKS.md.
@@ -40,17 +43,38 @@ def test_bit_identical_and_independent_of_jobs():
     assert np.array_equal(a.points, b.points)
 
 
-def test_free_space_gives_no_contacts():
+class _SelfTouchWatcher(ForwardingRobot):
+    """Passes the simulated arm through; after every step notes the arm-arm pairs PyBullet reports
+    touching (evaluation only)."""
+
+    def __init__(self, world):
+        super().__init__(world.robot())
+        self.world, self.pairs = world, set()
+
+    def on_step(self, command, reading):
+        p, arm = self.world.client, self.world.arm
+        self.pairs |= {tuple(sorted((c[3], c[4]))) for c in p.getContactPoints(arm, arm) if c[8] < 1e-4}
+
+
+def test_free_space_curling_onto_itself_gives_no_contacts():
+    """In free space the chain curls until it touches itself (PyBullet reports arm-arm contacts:
+    link 1 folds onto the base block); those sweeps end as self-contacts, never as contacts, and no
+    settled reading is taken.  Free joints swing to their limit until the chain has curled a full
+    turn; the rest are not swept."""
     band = cached_band(SMALL, planar=True)
     with ArmSimulation(SMALL) as world:
-        atts = run_wrap(world.robot(), np.eye(4), band, attempts=1)
-    assert not atts[0].contact.any()
-    # free joints swing to their limit until the chain has curled a full turn; the rest are not swept
-    reasons = atts[0].reasons
+        robot = _SelfTouchWatcher(world)
+        atts = run_wrap(robot, np.eye(4), band, attempts=1)
+    att = atts[0]
+    assert robot.pairs and all(b - a >= 2 for a, b in robot.pairs), robot.pairs
+    assert not att.contact.any() and not att.moments
+    assert localise_attempts(SMALL, atts, robot.gravity, SensorConfig()).points.shape == (0, 3)
+    reasons = att.reasons
+    assert StopReason.SELF in reasons
     k = reasons.index(StopReason.WRAPPED)
-    assert k > 0 and all(r is StopReason.LIMIT for r in reasons[:k])
+    assert k > 0 and all(r in (StopReason.LIMIT, StopReason.SELF) for r in reasons[:k])
     assert all(r is StopReason.WRAPPED for r in reasons[k:])
-    assert atts[0].q[:k].sum() >= ControlConfig().max_curl
+    assert att.q[:k].sum() >= ControlConfig().max_curl
 
 
 def test_contact_faces_touch_the_cube():
