@@ -18,10 +18,16 @@ the detector's signals (:mod:`explore3d.detect`) get when nothing new is touched
    from a few wrap poses around it.  A link held against the ball, or struck by it, shakes the rest
    of the chain; a sweep step counts as *contact-free* when, by the arm's own model at the sensed
    angles, the swept link and every distal link are farther than :func:`contact_tolerance_m` from
-   the known ball and no two non-adjacent bodies of the arm are within
-   :func:`self_contact_tolerance_m` of each other (a chain curled round the object can touch
-   itself: contact, not noise; such steps are counted per pass in ``"self_contact_steps"``, the
-   sweeps the controller ended as self-contacts in ``"self_contacts"``).  The signals of contact-free steps are what an impact does to the other joints.
+   the known ball and no two non-adjacent bodies of the arm were within
+   :func:`self_contact_tolerance_m` of each other at any of the sweep's last
+   :data:`~explore3d.encircle.SELF_CONTACT_WINDOW_STEPS` readings (a chain curled round the object
+   can touch itself: contact, not noise; such steps are counted per pass in
+   ``"self_contact_steps"``, the sweeps the controller ended as self-contacts in
+   ``"self_contacts"``).  The window matters: the simulated tip link lying on the base block
+   flips off it within one physics step (Dantzig's solution; 0.42 rad in one step of small16's
+   calibration, the model's distance 0 -> 11 mm), so the next reading is clear of the block yet
+   carries the flip; taken as contact-free it gave joint 14 of a 16-link arm a band of 3.4 rad
+   and that joint never detected the cube (its tip link sank 10 mm into it).  The signals of contact-free steps are what an impact does to the other joints.
    In the *measure* pass a contact-free step never ends a sweep (the known object says nothing
    was touched) and its signals are recorded; near the ball the detector, with the bands measured
    so far, decides, so the chain presses and holds as it will in a run.  A *verify* pass then
@@ -34,6 +40,7 @@ measured in 1 and 2.  The result is cached once per setting, in memory and on di
 """
 from __future__ import annotations
 
+import collections
 import dataclasses
 import functools
 import hashlib
@@ -48,7 +55,8 @@ import numpy as np
 
 from .arm import ArmSpec
 from .detect import ContactBand, SweepDetector
-from .encircle import Controller, ControlConfig, StopReason, run_attempt, sweep_joint, sweep_speeds, sweep_torque_limits
+from .encircle import (SELF_CONTACT_WINDOW_STEPS, Controller, ControlConfig, StopReason, run_attempt, sweep_joint,
+                       sweep_speeds, sweep_torque_limits)
 from .kinematics import link_transforms
 from .selfcontact import self_contact_pairs
 from .sensing import SensorConfig
@@ -63,7 +71,8 @@ log = logging.getLogger(__name__)
 #: Bumped whenever the calibration procedure or the controller it runs changes (old cache entries
 #: are then ignored).  4: the pressing settle after each contact (explore3d.encircle).  5: the arm
 #: collides with itself; self-contacts end sweeps (StopReason.SELF) and are not contact-free steps.
-BAND_PROTOCOL_VERSION = 5
+#: 6: nor is a step within SELF_CONTACT_WINDOW_STEPS readings of one.
+BAND_PROTOCOL_VERSION = 6
 
 #: Wrap poses of the impact phase: 3D, plane normals through the ball's centre (one approach each).
 IMPACT_NORMALS_3D = 6
@@ -264,7 +273,9 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
             def observe(k, reading, lag, sig):
                 touching_itself = bool(self_contact_pairs(spec, reading.q, self_tol))
                 counts["self_contact_steps"] += touching_itself
-                if touching_itself or distance(link_transforms(spec, reading.q, observe.T)[k:]).min() <= tol:
+                observe.recent.append((k, touching_itself))
+                touched_lately = any(t for j, t in observe.recent if j == k)  # this sweep's last readings
+                if touched_lately or distance(link_transforms(spec, reading.q, observe.T)[k:]).min() <= tol:
                     return SweepDetector.exceeds(running_band() if name == "measure" else band, k, lag, sig)
                 if name == "measure":
                     impact.add(k, lag, sig)
@@ -279,6 +290,7 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
                 for i, pose in enumerate(poses):
                     robot.reseed((2, len(passes), oi, i))
                     observe.T = pose.T_world_base
+                    observe.recent = collections.deque(maxlen=SELF_CONTACT_WINDOW_STEPS)
                     att = run_attempt(robot, pose.T_world_base, band, control, observer=observe)
                     counts["contacts"] += int(att.contact.sum())
                     counts["self_contacts"] += sum(r is StopReason.SELF for r in att.reasons)
