@@ -71,7 +71,7 @@ log = logging.getLogger(__name__)
 #: Bumped whenever the calibration procedure or the controller it runs changes (old cache entries
 #: are then ignored).  4: the pressing settle after each contact (explore3d.encircle).  5: the arm
 #: collides with itself; self-contacts end sweeps (StopReason.SELF) and are not contact-free steps.
-#: 6: nor is a step within SELF_CONTACT_WINDOW_STEPS readings of one.
+#: 6: nor is a step within SELF_CONTACT_WINDOW_STEPS readings of one; the attempt ends at a self-contact.
 BAND_PROTOCOL_VERSION = 6
 
 #: Wrap poses of the impact phase: 3D, plane normals through the ball's centre (one approach each).

@@ -7,8 +7,9 @@ with a small inward bias, the paper's proposal against relaxation) and the next 
 goes on until every joint has made contact or reached its limit.  A curling chain can also touch
 itself (the simulation collides the arm with itself, :attr:`explore3d.sim.SimConfig.self_collision`):
 a detection at which the arm's own model puts a link the swept joint carries against the base block
-or a link before it is a self-contact (:mod:`explore3d.selfcontact`), not the object's; the joint
-backs off and is held as at its limit, and no contact is recorded.  One *wrap*: several attempts
+or a link before it is a self-contact (:mod:`explore3d.selfcontact`), not the object's: no contact
+is recorded and the attempt ends there (or, with ``ControlConfig.self_contact_action="retreat"``,
+the joint backs off and the next joint sweeps).  One *wrap*: several attempts
 from one base pose, the base joint stopping a step short of its previous stop angle each time.
 
 The code here sees the arm only through the :class:`~explore3d.robot.Robot` interface: joint
@@ -49,6 +50,7 @@ class StopReason(enum.Enum):
     STOP_ANGLE = "stop_angle"  #: the base joint reached this attempt's stop angle (attempts after the first)
     TIMEOUT = "timeout"  #: the sweep ran out of steps
     WRAPPED = "wrapped"  #: not swept: the chain before it had already curled a full turn (``max_curl``)
+    ENDED = "ended"  #: not swept: the attempt ended at a self-contact (``ControlConfig.self_contact_action``)
 
 
 @dataclass(frozen=True)
@@ -117,13 +119,8 @@ class ControlConfig:
             beyond) is within this distance, m, of one it does not (the base block, links before
             k; non-adjacent pairs only, :func:`explore3d.selfcontact.self_contact_pairs`): the
             pairs the sweep moved together (the carried chain is straight, the held one did not
-            move).  The sweep then ends like one at the joint's limit (:attr:`StopReason.SELF`):
-            no contact and no settled reading are recorded; the joints up to k are held where
-            they stand, the joint nearest the touch that can part the bodies backs off until the
-            model parts them by twice this (:func:`retreat`), the arm settles, the next joint
-            sweeps.  Backing off matters:
-            measured in free space, a chain held pressing against itself chattered and the next
-            sweeps detected at once (5 false contacts in one attempt of the default arm).
+            move).  The sweep then ends (:attr:`StopReason.SELF`): no contact and no settled
+            reading are recorded, and ``self_contact_action`` says what follows.
             Default 1 mm: measured on 12 wraps of the 80 mm cube (default 3D setting), every
             detection at which PyBullet reported an arm-arm contact (43) had the model put that
             pair within 0.06 mm (0.37 mm with an earlier version of this rule; the model's sharp
@@ -131,6 +128,17 @@ class ControlConfig:
             step late and quantised), and every one became a self-contact; 15 more self-contacts
             had the touch in the window only, and at none of the 58 did a carried link touch the
             cube.
+        self_contact_action: after a self-contact, ``"end"`` (default): the joints are held where
+            they stand and the attempt ends (the joints after k are not swept,
+            :attr:`StopReason.ENDED`); ``"retreat"``: the joints up to k are held, the joint
+            nearest the touch that can part the bodies backs off until the model parts them by
+            twice ``self_contact_tolerance`` (:func:`retreat`), the arm settles and the next joint
+            sweeps (backing off, not pressing on: measured in free space, a chain held pressing
+            against itself chattered and the next sweeps detected at once, 5 false contacts in one
+            attempt of the default arm).  Measured (default arm, 80 mm cube; BENCHMARKS.md,
+            "Self-collision"): the back-off's later sweeps, the distal chain bent out of the
+            straight shape the bands were measured with, gave 9 false detections in 79 (4 wraps,
+            3D; 4 in 74 ending) and the default 3D run's volume error 2.75% (2.25% ending).
     """
 
     speed: float = 3.0
@@ -152,6 +160,7 @@ class ControlConfig:
     still_steps: int = 8
     max_sweep_steps: int = 2000
     self_contact_tolerance: float = SELF_CONTACT_TOLERANCE_M
+    self_contact_action: str = "end"
 
     def __post_init__(self):
         check_field(self, "speed", 0, "rad/s", strict=True)
@@ -169,6 +178,8 @@ class ControlConfig:
         check_field(self, "still_steps", 1, integer=True)
         check_field(self, "max_sweep_steps", 1, integer=True)
         check_field(self, "self_contact_tolerance", 0, "m")
+        if self.self_contact_action not in ("retreat", "end"):
+            raise ValueError(f"ControlConfig.self_contact_action must be 'retreat' or 'end'; got {self.self_contact_action!r}")
         for name in ("watch_held", "gravity_compensation", "rereference_held", "press_while_settling"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"ControlConfig.{name} must be True or False; got {getattr(self, name)!r}")
@@ -438,6 +449,14 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
         if reason is StopReason.CONTACT and any(self_contact_pairs(spec, qs, cfg.self_contact_tolerance, moving_from=k)
                                                 for qs in ctl.sweep_q):
             reason = StopReason.SELF
+        if reason is StopReason.SELF and cfg.self_contact_action == "end":
+            q_ref[: k + 1] = q[: k + 1]
+            q = ctl.hold(q_ref)
+            reasons.append(reason)
+            detect_step[k] = ctl.steps
+            reasons.extend([StopReason.ENDED] * (n - k - 1))
+            detect_step[k + 1:] = ctl.steps
+            break
         if reason is StopReason.SELF:
             q = retreat(ctl, k, q_ref, speeds, 2.0 * cfg.self_contact_tolerance)
         elif reason is StopReason.CONTACT:

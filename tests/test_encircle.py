@@ -1,5 +1,6 @@
 """Whole-arm encirclement in PyBullet: oracle-free, deterministic, and the paper's findings."""
 import numpy as np
+import pytest
 import trimesh
 
 from explore3d.arm import ArmSpec
@@ -56,21 +57,28 @@ class _SelfTouchWatcher(ForwardingRobot):
         self.pairs |= {tuple(sorted((c[3], c[4]))) for c in p.getContactPoints(arm, arm) if c[8] < 1e-4}
 
 
-def test_free_space_curling_onto_itself_gives_no_contacts():
+@pytest.mark.parametrize("action", ["end", "retreat"])
+def test_curling_onto_itself_in_free_space_gives_no_contact(action):
     """In free space the chain curls until it touches itself (PyBullet reports arm-arm contacts:
     link 1 folds onto the base block); those sweeps end as self-contacts, never as contacts, and no
-    settled reading is taken.  Free joints swing to their limit until the chain has curled a full
-    turn; the rest are not swept."""
+    settled reading is taken.  By default the attempt ends at its first self-contact (the joints
+    after it are not swept); backing off instead, free joints swing to their limit until the chain
+    has curled a full turn, and the rest are not swept."""
     band = cached_band(SMALL, planar=True)
     with ArmSimulation(SMALL) as world:
         robot = _SelfTouchWatcher(world)
-        atts = run_wrap(robot, np.eye(4), band, attempts=1)
+        atts = run_wrap(robot, np.eye(4), band, attempts=1, cfg=ControlConfig(self_contact_action=action))
     att = atts[0]
     assert robot.pairs and all(b - a >= 2 for a, b in robot.pairs), robot.pairs
     assert not att.contact.any() and not att.moments
     assert localise_attempts(SMALL, atts, robot.gravity, SensorConfig()).points.shape == (0, 3)
     reasons = att.reasons
     assert StopReason.SELF in reasons
+    if action == "end":
+        k = reasons.index(StopReason.SELF)
+        assert k > 0 and all(r is StopReason.LIMIT for r in reasons[:k])
+        assert all(r is StopReason.ENDED for r in reasons[k + 1:])
+        return
     k = reasons.index(StopReason.WRAPPED)
     assert k > 0 and all(r in (StopReason.LIMIT, StopReason.SELF) for r in reasons[:k])
     assert all(r is StopReason.WRAPPED for r in reasons[k:])
