@@ -237,6 +237,10 @@ ORACLE_FREE = textwrap.dedent("""
     assert len(ex.probe_rounds) == 1 and ex.n_wraps == 24 + ex.probe_rounds[0]["wraps"] > 24
     assert len(ex.swept) == ex.n_wraps and res.carved is not None
     assert ex.n_contacts > 0 and ex.config.control.gravity_compensation and ex.logs is not None
+    # the arm collided with itself and told it from the object by its own model: attempts ended so
+    from explore3d.encircle import StopReason
+    assert ex.config.sim.self_collision and ex.config.control.self_contact_action == "end"
+    assert any(r is StopReason.SELF for w in ex.attempts for a in w for r in a.reasons)
     # the wraps' planes are tilted: gravity compensation actually ran (non-zero feed-forward)
     assert max(np.abs(l.tau_ff).max() for l in ex.logs) > 0
     # the hull took contacts localised from the settled readings, their heights resolved
@@ -249,8 +253,9 @@ ORACLE_FREE = textwrap.dedent("""
 def test_exploration_runs_with_every_world_query_removed_from_pybullet(tmp_path):
     """The world queries are deleted from the pybullet module *before* explore3d is imported, so no
     alias bound at import time escapes; a 3D exploration with gravity compensation, two worker
-    processes, the contact localisation, the free space, a round of probes aimed from the estimate
-    and the carved reconstruction runs in that process and its workers."""
+    processes, the contact localisation, the free space, a round of probes aimed from the estimate,
+    self-contacts ending attempts and the carved reconstruction runs in that process and its
+    workers."""
     env = {**os.environ, "EXPLORE3D_CACHE_DIR": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", ORACLE_FREE.format(names=WORLD_QUERIES)], capture_output=True,
                          text=True, env=env, cwd=tmp_path, timeout=600)
