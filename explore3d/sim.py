@@ -60,7 +60,16 @@ class SimConfig:
             is not excluded: with two neighbouring joints near the upper limit link i + 2 folds
             into link i (default arm: they touch from 1.9 rad on both joints; at 2 rad PyBullet and
             the model overlap them by 3.6 mm), which a real arm of these boxes would feel.  The exploration tells such a touch from the object's by
-            the arm's own kinematics (:mod:`explore3d.selfcontact`).  False: links pass through
+            the arm's own kinematics (:mod:`explore3d.selfcontact`).  Measured with the Dantzig
+            solver: a link lying on the base block now and then flips off it within one step
+            (small16's tip: 0.417 rad in one step, the model's distance 0 -> 11 mm; 9 such flips in
+            253 base-link contact steps of 6 default-arm wraps of the cube, against 31 in 10943
+            arm-object contact steps).  Re-running that step with ERP 0.05 or 0.01, 200 solver
+            iterations, split impulse or a 1 mm contact breaking threshold gives the same flip;
+            the SI solver none (0.013 rad), PGS 0.023 rad, 4 substeps 0.35 rad; the base block as a
+            separate static body instead of the arm's base link flips too (18 in 485).  The band
+            calibration and the controller therefore judge a detection by the sweep's last
+            readings, not its own (:data:`explore3d.encircle.SELF_CONTACT_WINDOW_STEPS`).  False: links pass through
             each other (the behaviour before self-collision existed).
     """
 
