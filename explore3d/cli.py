@@ -179,6 +179,8 @@ RUN_OPTIONS = {
     "points": _choice("points", ("contacts", "links")),
     # rounds of probe wraps aimed at the estimate's least supported surface (3d; 0: none)
     "probes": _int_min("--probes", 0),
+    # how each attempt encircles: the paper's straight sweep or its proposed curl-back
+    "encircle": _choice("encircle", ("straight", "curl-back")),
     # outputs
     "density": _positive("--density"),
     "height": _positive("--height"),
@@ -289,6 +291,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--probes", type=RUN_OPTIONS["probes"], metavar="ROUNDS",
                    help="3d: at most this many rounds of probe wraps through the estimate's least supported "
                         "surface after the first wraps (default 3; 0: none)")
+    r.add_argument("--encircle", type=RUN_OPTIONS["encircle"],
+                   help="straight (default: every joint sweeps the straight chain beyond it, the paper's method) "
+                        "or curl-back (after the first contact the chain beyond a few straight links curls away "
+                        "from the object and unravels as contacts are found, the paper's Future Work)")
     r.add_argument("--density", type=RUN_OPTIONS["density"],
                    help=f"density of the estimate body in estimate.urdf, kg/m^3 (default {DEFAULT_DENSITY_KG_M3:g})")
     r.add_argument("--height", type=RUN_OPTIONS["height"],
@@ -348,6 +354,7 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--angles", type=RUN_OPTIONS["angles"], help="3d: approach angles per plane")
     k.add_argument("--probes", type=RUN_OPTIONS["probes"], metavar="ROUNDS",
                    help="3d: rounds of probe wraps aimed at the estimate (default 3; 0: none)")
+    k.add_argument("--encircle", type=RUN_OPTIONS["encircle"], help="straight (default) or curl-back")
     k.add_argument("--no-free-space", dest="no_free_space", action="store_true",
                    help="3d: neither record the swept space nor carve with it (the paper's hull of the straight "
                         "sweeps; implies --probes 0)")
@@ -434,6 +441,10 @@ def explore_config(opts: dict):
             from .active import ProbeConfig
 
             kw["probes"] = ProbeConfig(rounds=opts["probes"]) if opts["probes"] else None
+        if opts.get("encircle") == "curl-back":
+            from .encircle import CurlBack
+
+            kw["curl_back"] = CurlBack()
         return ExploreConfig(**kw)
     except (TypeError, ValueError) as exc:
         raise UsageError(str(exc)) from None
@@ -657,7 +668,7 @@ def cmd_compare(args) -> int:
     from ._quiet import quiet_c_output
 
     _check_object_name(args.object)
-    opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs", "probes")
+    opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs", "probes", "encircle")
             if getattr(args, k) is not None}
     config = explore_config({**opts, "probes": 0} if args.no_free_space else opts)
     if args.no_free_space:
