@@ -35,7 +35,8 @@ Each run gets ``jobs_per_run`` processes for its wraps (``ExploreConfig.jobs``; 
 depend on it).
 
 Test hook: the environment variable ``EXPLORE3D_SWEEP_FAULT`` = ``"segfault:OBJECT"`` or
-``"raise:OBJECT"`` makes the runs of that object (as stored) die by SIGSEGV or raise, in the worker.
+``"raise:OBJECT"`` (several separated by ``;``) makes the runs of that object (as stored) die by
+SIGSEGV or raise, in the worker.
 """
 from __future__ import annotations
 
@@ -374,16 +375,17 @@ def one_line(exc: BaseException, limit: int = 400) -> str:
 
 
 def _fault_hook(task: RunTask) -> None:
-    spec = os.environ.get("EXPLORE3D_SWEEP_FAULT", "")
-    what, _, obj = spec.partition(":")
-    if not spec or obj != task.object:
-        return
-    if what == "segfault":
-        import signal
+    """The test hook of the module docstring (entries separated by ';')."""
+    for spec in os.environ.get("EXPLORE3D_SWEEP_FAULT", "").split(";"):
+        what, _, obj = spec.partition(":")
+        if obj != task.object:
+            continue
+        if what == "segfault":
+            import signal
 
-        os.kill(os.getpid(), signal.SIGSEGV)
-    elif what == "raise":
-        raise RuntimeError(f"injected failure (EXPLORE3D_SWEEP_FAULT={spec})")
+            os.kill(os.getpid(), signal.SIGSEGV)
+        elif what == "raise":
+            raise RuntimeError(f"injected failure (EXPLORE3D_SWEEP_FAULT={spec})")
 
 
 def execute(task: RunTask, vertices, faces, arm=None) -> dict:
