@@ -272,6 +272,10 @@ def _sd_scale(sd_mm: np.ndarray) -> float:
     return max(float(np.percentile(a, SD_PERCENTILE)) if a.size else 0.0, SD_MIN_SCALE_MM)
 
 
+#: The truth's edges between faces meeting at more than this angle are drawn (its outline) in
+#: :func:`signed_distance_figure`; a smooth surface's tessellation stays undrawn.
+TRUTH_EDGE_ANGLE_DEG = 30.0
+
 #: :func:`subdivided` splits edges longer than the estimate's largest extent over this.
 SD_EDGE_DIVISOR = 30.0
 
@@ -292,7 +296,8 @@ def signed_distance_figure(estimate, truth, path, title: str = "", views=VIEWS[:
 
     3D (trimesh meshes, metres): the estimate is first :func:`subdivided` (a hull's large faces
     bridging a concavity have their vertices on the surface: only their interior is wrong), then
-    each face takes the mean of its vertices' distances, drawn from ``views`` ((elevation, azimuth) degrees) with the truth as a faint grey surface.
+    each face takes the mean of its vertices' distances, drawn from ``views`` ((elevation, azimuth)
+    degrees) with the truth's outline (edges sharper than :data:`TRUTH_EDGE_ANGLE_DEG`) in grey.
     Planar (shapely polygons): the estimate's boundary samples coloured, the truth's outline in
     grey.  ``thumbnail``: one small view (the sweep report's table).  A symmetric diverging scale
     (:data:`SD_CMAP`, +- :data:`SD_PERCENTILE` of |distance|) with a colorbar in mm."""
@@ -330,11 +335,15 @@ def signed_distance_figure(estimate, truth, path, title: str = "", views=VIEWS[:
         lo = np.minimum(V.min(0), truth.bounds[0])
         hi = np.maximum(V.max(0), truth.bounds[1])
         c, r = (lo + hi) / 2.0, float((hi - lo).max()) / 2.0
+        from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+        sharp = truth.face_adjacency_angles > np.radians(TRUTH_EDGE_ANGLE_DEG)
+        edges = truth.vertices[truth.face_adjacency_edges[sharp]]  # (k, 2, 3): the truth's outline
         for i, (elev, azim) in enumerate(views):
             ax = fig.add_subplot(1, n, i + 1, projection="3d")
-            tv, tf = truth.vertices, truth.faces
-            ax.plot_trisurf(tv[:, 0], tv[:, 1], tv[:, 2], triangles=tf, color="0.6", alpha=0.12, linewidth=0)
             ax.add_collection3d(Poly3DCollection(V[F], facecolors=cmap(norm(face_sd)), edgecolors="none"))
+            if len(edges):
+                ax.add_collection3d(Line3DCollection(edges, colors="0.25", linewidths=0.6))
             ax.set_xlim(c[0] - r, c[0] + r)
             ax.set_ylim(c[1] - r, c[1] + r)
             ax.set_zlim(c[2] - r, c[2] + r)
@@ -344,6 +353,7 @@ def signed_distance_figure(estimate, truth, path, title: str = "", views=VIEWS[:
                 ax.set_axis_off()
             else:
                 ax.tick_params(labelsize=6)
+                ax.locator_params(nbins=4)
             axes.append(ax)
     sm = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
     cb = fig.colorbar(sm, ax=axes, shrink=0.8, extend="both", pad=0.08 if not planar else 0.04)

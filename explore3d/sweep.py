@@ -737,5 +737,7 @@ def run_sweep(objects, out, grid: dict | None = None, *, size: float | None = No
         finally:
             if bar is not None:
                 bar.close()
+            if (folder / ".work").is_dir() and not any((folder / ".work").iterdir()):
+                (folder / ".work").rmdir()
     return SweepSummary(total=len(tasks), stored_before=stored_before, ran=n_ok + n_failed, ok=n_ok,
                         failed=n_failed, folder=str(folder))
