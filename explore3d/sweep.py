@@ -354,18 +354,9 @@ def sweep_tasks(objects, grid: dict | None = None, size: float | None = None, jo
             load_arm(arm)  # a one-line ValueError for an unknown arm, before any run
     names = resolve_objects(objects)
     combos = settings_grid(grid)
-    hashes = {n: mesh_sha256(n) if _loadable(n) else "unreadable" for n in names}
+    hashes = {n: mesh_sha256(n) for n in names}
     return [RunTask(object=n, mesh_sha256=hashes[n], settings=s, seed=int(s.get("seed", 0)), version=__version__,
                     jobs=jobs_per_run) for n in names for s in combos]
-
-
-def _loadable(name: str) -> bool:
-    try:
-        from .objects import BUILTIN_OBJECTS, _resolve_path
-
-        return name in BUILTIN_OBJECTS or _resolve_path(name).is_file()
-    except ValueError:
-        return False
 
 
 def one_line(exc: BaseException, limit: int = 400) -> str:
