@@ -65,12 +65,12 @@ _REPORT_TIMING_KEYS = ("timings", "wall_s")
 
 #: Settings a grid may sweep, each an option of ``explore3d run`` (see ``explore3d run --help``).
 SWEEP_KEYS = ("a", "angles", "arm", "attempts", "base_step", "clearance", "collision_margin", "directions",
-              "face_offset", "method", "mirrored", "mode", "n_along", "n_height", "offsets", "points", "probes",
+              "encircle", "face_offset", "method", "mirrored", "mode", "n_along", "n_height", "offsets", "points", "probes",
               "seed", "sensing", "size")
 
 #: Settings left out of the canonical settings when they have these values (what ``run`` does
 #: without them), so ``--grid a=0.05`` and no ``a`` at all are the same combination.
-_DEFAULTS = {"arm": "default", "method": "exponential", "mode": "3d"}
+_DEFAULTS = {"arm": "default", "method": "exponential", "mode": "3d", "encircle": "straight"}
 
 _BOOL_WORDS = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
 
