@@ -1,4 +1,4 @@
-"""Command line: ``explore3d run|reconstruct|evaluate|table1|arm|objects``.
+"""Command line: ``explore3d run|reconstruct|evaluate|compare|sweep|sweep-report|table1|arm|objects``.
 
 The parser produces the same dataclasses the Python API takes (:class:`ExploreConfig`,
 :class:`ArmSpec`); ``main(argv)`` returns an exit code and never raises or prints a traceback:
@@ -179,6 +179,8 @@ RUN_OPTIONS = {
     "points": _choice("points", ("contacts", "links")),
     # rounds of probe wraps aimed at the estimate's least supported surface (3d; 0: none)
     "probes": _int_min("--probes", 0),
+    # how each attempt encircles: the paper's straight sweep or its proposed curl-back
+    "encircle": _choice("encircle", ("straight", "curl-back")),
     # outputs
     "density": _positive("--density"),
     "height": _positive("--height"),
@@ -289,6 +291,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--probes", type=RUN_OPTIONS["probes"], metavar="ROUNDS",
                    help="3d: at most this many rounds of probe wraps through the estimate's least supported "
                         "surface after the first wraps (default 3; 0: none)")
+    r.add_argument("--encircle", type=RUN_OPTIONS["encircle"],
+                   help="straight (default: every joint sweeps the straight chain beyond it, the paper's method) "
+                        "or curl-back (after the first contact the chain beyond a few straight links curls away "
+                        "from the object and unravels as contacts are found, the paper's Future Work)")
     r.add_argument("--density", type=RUN_OPTIONS["density"],
                    help=f"density of the estimate body in estimate.urdf, kg/m^3 (default {DEFAULT_DENSITY_KG_M3:g})")
     r.add_argument("--height", type=RUN_OPTIONS["height"],
@@ -348,6 +354,7 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--angles", type=RUN_OPTIONS["angles"], help="3d: approach angles per plane")
     k.add_argument("--probes", type=RUN_OPTIONS["probes"], metavar="ROUNDS",
                    help="3d: rounds of probe wraps aimed at the estimate (default 3; 0: none)")
+    k.add_argument("--encircle", type=RUN_OPTIONS["encircle"], help="straight (default) or curl-back")
     k.add_argument("--no-free-space", dest="no_free_space", action="store_true",
                    help="3d: neither record the swept space nor carve with it (the paper's hull of the straight "
                         "sweeps; implies --probes 0)")
@@ -380,6 +387,41 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--joint-lower", type=lambda s: _number(s, "--joint-lower"), help="rad, < 0")
     a.add_argument("--joint-upper", type=lambda s: _number(s, "--joint-upper"), help="rad, > 0")
     a.set_defaults(func=cmd_arm)
+
+    w = sub.add_parser("sweep", help="run every object x settings combination once, rows in an SQLite database",
+                       description="Run every combination of OBJECTS (built-in names, mesh files, globs, "
+                                   "pybullet_data:PATTERN) and the --grid settings once, as 'explore3d run' would "
+                                   "(no pictures), storing each result as it finishes in OUT/sweep.db and its estimate "
+                                   "in OUT/runs/<key>/.  Run the same command again to finish a killed sweep: only "
+                                   "the combinations without a row run.  Failed runs (also crashed workers) are "
+                                   "stored with a one-line reason.  Settings: " + ", ".join(_sweep_keys()) + ".")
+    w.add_argument("objects", nargs="+", help="built-in names, mesh files, globs or pybullet_data:PATTERN (quote globs)")
+    w.add_argument("--out", required=True, help="output folder (sweep.db, runs/, truths/)")
+    w.add_argument("--size", type=RUN_OPTIONS["size"], help="rescale every object so its longest side is SIZE metres")
+    w.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2,...",
+                   help="a swept setting and its values (repeat for more; one value fixes a setting), e.g. "
+                        "--grid a=0.02,0.05,0.1 --grid arm=default,paper")
+    w.add_argument("--grid-file", help="TOML file of KEY = value or KEY = [values] (--grid flags override its keys)")
+    w.add_argument("--workers", type=_int_min("--workers"), default=1, help="runs at once (default 1)")
+    w.add_argument("--jobs-per-run", dest="jobs_per_run", type=_int_min("--jobs-per-run"), default=1,
+                   help="processes per run for its wraps (default 1; results do not depend on it)")
+    w.add_argument("--ray", action="store_true",
+                   help="run on Ray: a local Ray with --workers x --jobs-per-run CPUs, or the cluster at "
+                        "--ray-address / $RAY_ADDRESS (pip install 'explore3d[ray]')")
+    w.add_argument("--ray-address", help="an existing Ray cluster (implies --ray)")
+    w.add_argument("--retry-failed", action="store_true", help="also run the combinations stored as failures again")
+    w.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary line")
+    w.set_defaults(func=cmd_sweep)
+
+    sr = sub.add_parser("sweep-report", help="tables, a plot and an HTML page of a sweep",
+                        description="Write report.md and report.csv (per object and setting: error, IoU, Chamfer, "
+                                    "time, failures), errors.png (error against each swept setting) and report.html "
+                                    "(the table with a thumbnail per run: the estimate coloured by its signed "
+                                    "distance to the truth, mm) for the sweep in DIR.")
+    sr.add_argument("folder", metavar="DIR", help="the --out folder of 'explore3d sweep'")
+    sr.add_argument("--out", help="folder for the report (default: DIR/report)")
+    sr.add_argument("--no-thumbnails", dest="thumbnails", action="store_false", help="skip the thumbnails (faster)")
+    sr.set_defaults(func=cmd_sweep_report)
 
     o = sub.add_parser("objects", help="list the built-in objects with their sizes",
                        description="List the built-in objects (extents in mm, volume in cm^3).")
@@ -434,6 +476,10 @@ def explore_config(opts: dict):
             from .active import ProbeConfig
 
             kw["probes"] = ProbeConfig(rounds=opts["probes"]) if opts["probes"] else None
+        if opts.get("encircle") == "curl-back":
+            from .encircle import CurlBack
+
+            kw["curl_back"] = CurlBack()
         return ExploreConfig(**kw)
     except (TypeError, ValueError) as exc:
         raise UsageError(str(exc)) from None
@@ -657,7 +703,7 @@ def cmd_compare(args) -> int:
     from ._quiet import quiet_c_output
 
     _check_object_name(args.object)
-    opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs", "probes")
+    opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs", "probes", "encircle")
             if getattr(args, k) is not None}
     config = explore_config({**opts, "probes": 0} if args.no_free_space else opts)
     if args.no_free_space:
@@ -687,6 +733,48 @@ def cmd_compare(args) -> int:
           f"{report['localisation']['n_localised']} localised contacts ({report['localisation_used']['n_localised']} "
           f"hulled), {report['skin_contacts']} skin contacts ({report['skin_loaded']} carrying force)")
     print(format_compare(report))
+    return 0
+
+
+def _sweep_keys():
+    from .sweep import SWEEP_KEYS
+
+    return SWEEP_KEYS
+
+
+def cmd_sweep(args) -> int:
+    """Parse -> :func:`explore3d.sweep.run_sweep` -> one summary line."""
+    import os
+
+    from .sweep import parse_grid, read_grid_file, run_sweep, sweep_tasks
+
+    try:
+        grid = read_grid_file(args.grid_file) if args.grid_file else {}
+        grid.update(parse_grid(args.grid))
+        sweep_tasks(args.objects, grid, size=args.size)  # every name, value and arm checked before any run
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    backend = "ray" if (args.ray or args.ray_address or os.environ.get("RAY_ADDRESS")) else "local"
+    try:
+        s = run_sweep(args.objects, args.out, grid, size=args.size, workers=args.workers,
+                      jobs_per_run=args.jobs_per_run, backend=backend, ray_address=args.ray_address,
+                      retry_failed=args.retry_failed, progress=not args.quiet)
+    except OSError as exc:
+        raise RunError(f"cannot write the sweep to {args.out} ({exc.strerror or exc}); choose a writable --out") from None
+    if not args.quiet:
+        print(f"sweep: {s.total} combinations, {s.stored_before} stored before, {s.ran} run ({s.ok} ok, "
+              f"{s.failed} failed) on {backend} -> {Path(args.out) / 'sweep.db'}")
+    return 0
+
+
+def cmd_sweep_report(args) -> int:
+    from .sweep_report import write_sweep_report
+
+    try:
+        files = write_sweep_report(args.folder, args.out, thumbnails=args.thumbnails)
+    except ValueError as exc:
+        raise RunError(str(exc)) from None
+    print(f"sweep report: {', '.join(p.name for p in files)} -> {files[0].parent}")
     return 0
 
 

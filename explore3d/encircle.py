@@ -186,6 +186,53 @@ class ControlConfig:
 
 
 @dataclass(frozen=True)
+class CurlBack:
+    """The curl-back encirclement the paper proposes (Future Work): after the first detected contact
+    the links beyond the swept joint, except ``straight_links`` of them, curl back away from the
+    object; after every further sweep the curl rolls on by one link, so the chain unravels around
+    the object as contacts are found.
+
+    The joint swept next then carries ``straight_links`` straight links and a curl that turns away
+    from the object, not a straight rod as long as the rest of the chain: the straight sweep's rod
+    meets the far rim of a pocket before its near links reach into it (a string around the cross
+    section), the short finger reaches in.  The curl is a hairpin of joints bent outward (negative
+    angles) by equal amounts totalling ``turn``; the links beyond it are straight, running back
+    beside the chain, away from the object.  Between sweeps the arm moves to the next curl at the
+    controller's ``speed`` with every motor's full torque (the motion only turns links away from
+    the object, or straightens the finger's next link as the straight sweep's chain starts).
+
+    Attributes:
+        straight_links: straight links beyond the swept joint (>= 1; the paper's "except for a few").
+        turn: the curl's total outward turn, rad (pi: the links beyond run back beside the chain).
+        bend: the largest outward bend of one curled joint, rad; the curl's joints share ``turn``
+            equally in as few joints as this allows.  Must fit the arm's lower joint limit less the
+            controller's ``limit_margin`` (checked when an attempt starts).
+    """
+
+    straight_links: int = 2
+    turn: float = math.pi
+    bend: float = 0.45
+
+    def __post_init__(self):
+        check_field(self, "straight_links", 1, integer=True)
+        check_field(self, "turn", 0, "rad", strict=True)
+        check_field(self, "bend", 0, "rad", strict=True)
+
+    def offsets(self, spec: ArmSpec, cfg: "ControlConfig", j: int) -> np.ndarray:
+        """(n,) references, rad, of the joints beyond joint ``j`` while ``j`` is swept (entries up
+        to ``j`` are 0 and not used): ``straight_links`` zeros, then the curl, then zeros."""
+        room = -spec.joint_lower - cfg.limit_margin
+        if self.bend > room + 1e-12:
+            raise ValueError(f"CurlBack.bend must be at most the arm's lower joint limit less the limit margin, "
+                             f"{room:.3f} rad; got {self.bend!r} (pass a smaller bend)")
+        m = math.ceil(self.turn / self.bend - 1e-9)
+        out = np.zeros(spec.n_links)
+        first = j + 1 + self.straight_links
+        out[first:first + m] = -self.turn / m
+        return out
+
+
+@dataclass(frozen=True)
 class Attempt:
     """The result of one attempt.
 
@@ -214,6 +261,7 @@ class Attempt:
     trajectory: np.ndarray | None = None
     trajectory_ref: np.ndarray | None = None
     contact_step: np.ndarray | None = None
+    trajectory_joint: np.ndarray | None = None
     moments: tuple = ()
 
 
@@ -282,7 +330,7 @@ class Controller:
         self.reading: JointReading | None = None
         self.sweep_q: collections.deque = collections.deque(maxlen=SELF_CONTACT_WINDOW_STEPS)  # the sweep's last angles
         self.steps = 0
-        self.traj, self.traj_ref = ([], []) if record else (None, None)
+        self.traj, self.traj_ref, self.traj_joint = ([], [], []) if record else (None, None, None)
 
     def start(self) -> np.ndarray:
         """Begin the motion with the arm straight at rest; returns the first reading's angles."""
@@ -306,6 +354,19 @@ class Controller:
         for _ in range(self.cfg.settle_steps):
             q = self.send(q_ref)
         return q
+
+    def move(self, q_from, q_to) -> np.ndarray:
+        """Move the references from ``q_from`` to ``q_to`` (n,), rad, on a cosine profile whose
+        fastest joint peaks at the controller's ``speed``, with every motor's full torque; then
+        settle (:meth:`settle`).  Returns the last reading's angles."""
+        q_from, q_to = np.asarray(q_from, float), np.asarray(q_to, float)
+        span = float(np.max(np.abs(q_to - q_from), initial=0.0))
+        steps = math.ceil(math.pi / 2 * span / (self.cfg.speed * self.robot.dt))
+        for i in range(1, steps + 1):
+            s = 0.5 - 0.5 * math.cos(math.pi * i / steps)
+            self.send(q_from + s * (q_to - q_from))
+        self.settle(q_to)
+        return self.reading.q
 
     def settle(self, q_ref, limits=None) -> tuple[bool, JointReading]:
         """Hold ``q_ref`` at least ``settle_steps`` and at most ``contact_settle_steps`` steps,
@@ -359,6 +420,7 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
         if ctl.traj is not None:
             ctl.traj.append(q)
             ctl.traj_ref.append(q_ref.copy())
+            ctl.traj_joint.append(k)
         lag, sig = det.update(prev, q_ref, q)
         verdict = None if observer is None else observer(k, ctl.reading, lag, sig)
         if verdict is None:
@@ -412,7 +474,8 @@ def retreat(ctl: Controller, k: int, q_ref: np.ndarray, speeds: np.ndarray, clea
 
 
 def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: ControlConfig = ControlConfig(),
-                base_stop: float | None = None, record: bool = False, observer=None) -> Attempt:
+                base_stop: float | None = None, record: bool = False, observer=None,
+                curl: CurlBack | None = None) -> Attempt:
     """One attempt from the base pose ``T_world_base`` (4, 4).
 
     Args:
@@ -422,6 +485,8 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
         record: keep the joint readings and references of every sweep step.
         observer: ``observer(k, reading, lag, sig)`` called at every sweep step (band calibration;
             see :func:`sweep_joint`).
+        curl: the curl-back encirclement (:class:`CurlBack`); None: the straight sweep, every
+            joint sweeps with the chain beyond it straight.
     """
     spec: ArmSpec = robot.spec
     n = spec.n_links
@@ -437,11 +502,19 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
     detect_step = np.zeros(n, dtype=int)
     contact_step = np.full(n, -1, dtype=int)
     moments: list = []
+    if curl is not None:
+        curl.offsets(spec, cfg, 0)  # the bend fits the arm (raises before moving)
     for k in range(n):
         if k > 0 and q[:k].sum() >= cfg.max_curl:
             reasons.extend([StopReason.WRAPPED] * (n - k))
             detect_step[k:] = ctl.steps
             break
+        if curl is not None and contact.any():  # curl back (after the first contact) or roll on
+            target = q_ref.copy()
+            target[k + 1:] = curl.offsets(spec, cfg, k)[k + 1:]
+            if not np.array_equal(target, q_ref):
+                q = ctl.move(q_ref, target)
+                q_ref[:] = target
         base = k == 0 and base_stop is not None
         stop = min(upper, base_stop) if base else upper
         reason = sweep_joint(ctl, k, q_ref, stop, band, speeds[k], sweep_torques[k], base, observer)
@@ -485,18 +558,20 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
         T_world_base=np.asarray(T_world_base, dtype=float).copy(), q=q.copy(), q_ref=q_ref.copy(), contact=contact,
         reasons=tuple(reasons), detect_step=detect_step, steps=ctl.steps,
         trajectory=np.array(ctl.traj) if record else None, trajectory_ref=np.array(ctl.traj_ref) if record else None,
+        trajectory_joint=np.array(ctl.traj_joint, dtype=int) if record else None,
         contact_step=contact_step, moments=tuple(moments),
     )
 
 
 def run_wrap(robot: Robot, T_world_base, band: ContactBand, attempts: int = 4, base_step: float = 0.1,
-             cfg: ControlConfig = ControlConfig(), record: bool = False) -> list[Attempt]:
+             cfg: ControlConfig = ControlConfig(), record: bool = False, curl: CurlBack | None = None) -> list[Attempt]:
     """``attempts`` attempts from one base pose: the first sweeps the base joint until contact;
-    each later one stops the base joint ``base_step`` rad short of the previous stop angle."""
+    each later one stops the base joint ``base_step`` rad short of the previous stop angle.
+    ``curl``: the curl-back encirclement (:class:`CurlBack`), None: the straight sweep."""
     out = []
     stop = None
     for m in range(attempts):
-        att = run_attempt(robot, T_world_base, band, cfg, base_stop=stop, record=record)
+        att = run_attempt(robot, T_world_base, band, cfg, base_stop=stop, record=record, curl=curl)
         out.append(att)
         prev = att.q[0] if stop is None else stop
         stop = prev - base_step

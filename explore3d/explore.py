@@ -22,7 +22,7 @@ from .directions import WrapPose, planar_wrap_poses, spatial_wrap_poses
 from .band import cached_band
 from .contacts import ContactSet, contacts_for_hull, localise_attempts
 from .detect import ContactBand
-from .encircle import Attempt, ControlConfig, run_wrap
+from .encircle import Attempt, ControlConfig, CurlBack, run_wrap
 from .kinematics import link_surface_points
 from .freespace import swept_area
 from .robot import ForwardingRobot, RecordingRobot
@@ -83,6 +83,10 @@ class ExploreConfig:
             (:class:`~explore3d.active.ProbeConfig`; 3d only, needs ``free_space``); None: none.
             Measured on the default run (BENCHMARKS.md, "Free space, carving and probes"): the
             L-block from 18.8% (no carving, no probes) to 10.5% with 150 wraps in place of 96.
+        curl_back: every wrap's attempts use the curl-back encirclement
+            (:class:`~explore3d.encircle.CurlBack`: after the first contact the chain beyond the
+            swept joint's few straight links curls away from the object and unravels as contacts
+            are found); None (default): the straight sweep of the paper.
     """
 
     mode: str = "3d"
@@ -105,6 +109,7 @@ class ExploreConfig:
     points: str = "contacts"
     free_space: bool = True
     probes: ProbeConfig | None = field(default_factory=ProbeConfig)
+    curl_back: CurlBack | None = None
 
     def __post_init__(self):
         if self.mode not in ("planar", "3d"):
@@ -132,6 +137,8 @@ class ExploreConfig:
         for name, cls in (("control", ControlConfig), ("sim", SimConfig), ("sensors", SensorConfig)):
             if not isinstance(getattr(self, name), cls):
                 raise ValueError(f"ExploreConfig.{name} must be a {cls.__name__}; got {type(getattr(self, name)).__name__}")
+        if self.curl_back is not None and not isinstance(self.curl_back, CurlBack):
+            raise ValueError(f"ExploreConfig.curl_back must be a CurlBack or None; got {type(self.curl_back).__name__}")
         if self.probes is not None and not isinstance(self.probes, ProbeConfig):
             raise ValueError(f"ExploreConfig.probes must be a ProbeConfig or None; got {type(self.probes).__name__}")
         if self.probes is not None and not self.free_space and self.mode == "3d":
@@ -273,7 +280,7 @@ def _run_one(args):
         rec = RecordingRobot(robot) if config.record else robot
         angles = AngleRecorder(rec) if config.free_space else rec
         atts = run_wrap(angles, T, band, attempts=config.attempts, base_step=config.base_step, cfg=config.control,
-                        record=config.record)
+                        record=config.record, curl=config.curl_back)
         gravity = robot.gravity
         steps, log = world.steps, (rec.log() if config.record else None)
     # the contacts from the settled readings alone (the robot's own data, its model and gravity)

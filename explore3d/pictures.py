@@ -8,6 +8,9 @@
 * :func:`scene_image`: PyBullet's TinyRenderer (DIRECT client, no GUI) of the truth mesh and the
   arm at one attempt's final joint angles.
 * :func:`overview_figure`: one page with views and the numbers.
+* :func:`signed_distance_figure`: the estimate coloured by its signed distance to the truth, mm
+  (:func:`signed_distance_mm`; positive outside the truth: where the estimate is too big), a
+  diverging colormap centred on 0 with a colorbar.
 
 All coordinates are metres in the world frame (= the object's own frame).
 """
@@ -228,6 +231,141 @@ def overview_figure(path, numbers: dict, estimate_mesh=None, truth_mesh=None, po
     return _save(fig, path)
 
 
+#: Diverging colormap of :func:`signed_distance_figure` (red: estimate outside the truth, blue: inside).
+SD_CMAP = "RdBu_r"
+
+#: The colour scale of :func:`signed_distance_figure` spans +- this percentile of |distance| (a few
+#: stray vertices do not wash out the rest; the colorbar's arrows mark values beyond it) ...
+SD_PERCENTILE = 98.0
+#: ... and at least this many mm (a near-perfect estimate is not coloured by its float noise).
+SD_MIN_SCALE_MM = 0.1
+
+
+def signed_distance_mm(estimate, truth) -> np.ndarray:
+    """Signed distance of the estimate to the true surface, mm, positive outside the truth.
+
+    Args:
+        estimate, truth: closed trimesh meshes (metres, world frame), or shapely polygons (planar).
+
+    Returns:
+        (v,) at the estimate mesh's vertices, or (m,) at
+        :func:`~explore3d.metrics.boundary_samples` of the estimate polygon (400 samples plus its
+        vertices; evaluation only: it reads the truth).
+    """
+    if hasattr(estimate, "exterior") or hasattr(estimate, "geoms"):
+        import shapely
+
+        from .metrics import boundary_samples
+
+        P = boundary_samples(estimate, 400)
+        pts = shapely.points(P)
+        d = shapely.distance(truth.boundary, pts)
+        inside = shapely.contains(truth, pts)
+        return 1e3 * np.where(inside, -d, d)
+    from .sdf import SignedDistance
+
+    return 1e3 * SignedDistance(truth)(np.asarray(estimate.vertices, dtype=float))
+
+
+def _sd_scale(sd_mm: np.ndarray) -> float:
+    a = np.abs(sd_mm[np.isfinite(sd_mm)])
+    return max(float(np.percentile(a, SD_PERCENTILE)) if a.size else 0.0, SD_MIN_SCALE_MM)
+
+
+#: The truth's edges between faces meeting at more than this angle are drawn (its outline) in
+#: :func:`signed_distance_figure`; a smooth surface's tessellation stays undrawn.
+TRUTH_EDGE_ANGLE_DEG = 30.0
+
+#: :func:`subdivided` splits edges longer than the estimate's largest extent over this.
+SD_EDGE_DIVISOR = 30.0
+
+
+def subdivided(mesh, divisor: float = SD_EDGE_DIVISOR):
+    """A copy of ``mesh`` (trimesh, metres) with no edge longer than its largest extent / ``divisor``
+    (:func:`trimesh.remesh.subdivide_to_size`, at most 8 rounds): the same surface, with vertices
+    inside its faces where a picture colours per vertex."""
+    import trimesh
+
+    V, F = trimesh.remesh.subdivide_to_size(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces),
+                                            max_edge=float(np.max(mesh.extents)) / divisor, max_iter=8)
+    return trimesh.Trimesh(V, F, process=False)
+
+
+def signed_distance_figure(estimate, truth, path, title: str = "", views=VIEWS[:2], thumbnail: bool = False) -> Path:
+    """PNG at ``path``: the estimate coloured by :func:`signed_distance_mm` against the truth.
+
+    3D (trimesh meshes, metres): the estimate is first :func:`subdivided` (a hull's large faces
+    bridging a concavity have their vertices on the surface: only their interior is wrong), then
+    each face takes the mean of its vertices' distances, drawn from ``views`` ((elevation, azimuth)
+    degrees) with the truth's outline (edges sharper than :data:`TRUTH_EDGE_ANGLE_DEG`) in grey.
+    Planar (shapely polygons): the estimate's boundary samples coloured, the truth's outline in
+    grey.  ``thumbnail``: one small view (the sweep report's table).  A symmetric diverging scale
+    (:data:`SD_CMAP`, +- :data:`SD_PERCENTILE` of |distance|) with a colorbar in mm."""
+    from matplotlib.colors import Normalize
+
+    plt = _plt()
+    planar = hasattr(estimate, "exterior") or hasattr(estimate, "geoms")
+    if not planar:
+        estimate = subdivided(estimate)
+    sd = signed_distance_mm(estimate, truth)
+    m = _sd_scale(sd)
+    norm, cmap = Normalize(-m, m), plt.get_cmap(SD_CMAP)
+    views = views[:1] if thumbnail else views
+    n = 1 if planar else len(views)
+    fig = plt.figure(figsize=(3.4, 2.8) if thumbnail else (5.0 * n + 1.0, 5.0))
+    axes = []
+    if planar:
+        from .metrics import boundary_samples
+
+        ax = fig.add_subplot(1, 1, 1)
+        for ring in _rings(truth):
+            ax.plot(ring[:, 0], ring[:, 1], "-", color="0.5", lw=1.0)
+        P = boundary_samples(estimate, 400)
+        ax.scatter(P[:, 0], P[:, 1], c=sd, cmap=cmap, norm=norm, s=4 if thumbnail else 8)
+        ax.set_aspect("equal")
+        if not thumbnail:
+            ax.set_xlabel("x [m]")
+            ax.set_ylabel("y [m]")
+        axes.append(ax)
+    else:
+        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+        V, F = np.asarray(estimate.vertices, dtype=float), np.asarray(estimate.faces)
+        face_sd = sd[F].mean(axis=1)
+        lo = np.minimum(V.min(0), truth.bounds[0])
+        hi = np.maximum(V.max(0), truth.bounds[1])
+        c, r = (lo + hi) / 2.0, float((hi - lo).max()) / 2.0
+        from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+        sharp = truth.face_adjacency_angles > np.radians(TRUTH_EDGE_ANGLE_DEG)
+        edges = truth.vertices[truth.face_adjacency_edges[sharp]]  # (k, 2, 3): the truth's outline
+        for i, (elev, azim) in enumerate(views):
+            ax = fig.add_subplot(1, n, i + 1, projection="3d")
+            ax.add_collection3d(Poly3DCollection(V[F], facecolors=cmap(norm(face_sd)), edgecolors="none"))
+            if len(edges):
+                ax.add_collection3d(Line3DCollection(edges, colors="0.25", linewidths=0.6))
+            ax.set_xlim(c[0] - r, c[0] + r)
+            ax.set_ylim(c[1] - r, c[1] + r)
+            ax.set_zlim(c[2] - r, c[2] + r)
+            ax.set_box_aspect((1, 1, 1))
+            ax.view_init(elev=elev, azim=azim)
+            if thumbnail:
+                ax.set_axis_off()
+            else:
+                ax.tick_params(labelsize=6)
+                ax.locator_params(nbins=4)
+            axes.append(ax)
+    sm = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
+    cb = fig.colorbar(sm, ax=axes, shrink=0.8, extend="both", pad=0.08 if not planar else 0.04)
+    cb.set_label("signed distance [mm]" if thumbnail else "signed distance to the true surface [mm] (+ outside)",
+                 fontsize=7 if thumbnail else 9)
+    cb.ax.tick_params(labelsize=6 if thumbnail else 8)
+    if title or not thumbnail:
+        fig.suptitle(title or "estimate coloured by its signed distance to the truth",
+                     fontsize=8 if thumbnail else 11)
+    return _save(fig, path)
+
+
 def run_pictures(out, exploration, estimate, truth, mesh, err) -> list[str]:
     """All pictures of a ``run`` into folder ``out``; returns their file names.
 
@@ -263,6 +401,8 @@ def run_pictures(out, exploration, estimate, truth, mesh, err) -> list[str]:
         overview_figure(out / "overview.png", numbers, estimate_mesh=estimate, truth_mesh=truth,
                         points=exploration.points, scene=scene)
     names.append("overview.png")
+    signed_distance_figure(estimate, truth, out / "signed_distance.png", title=f"signed distance{_err_title(err)}")
+    names.append("signed_distance.png")
     if scene is not None:
         import matplotlib.image as mpimg
 

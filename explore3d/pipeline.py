@@ -149,7 +149,9 @@ def write_result(result: Result, mesh, out, fmt: str = "obj", pictures: bool = T
     * ``free_space.npz`` (runs with free space): the space every attempt swept through
       (:func:`~explore3d.freespace.save_swept`), with which ``explore3d reconstruct
       --free-space`` carves the hull as the run did;
-    * ``figure.png``/``views.png``, ``overview.png``, ``scene.png`` with ``pictures=True``.
+    * ``figure.png``/``views.png``, ``overview.png``, ``scene.png`` and ``signed_distance.png`` (the
+      estimate coloured by its signed distance to the truth, mm:
+      :func:`~explore3d.pictures.signed_distance_figure`) with ``pictures=True``.
 
     ``mesh`` is the explored object (closed trimesh, metres), used for the pictures only.  Files
     are written atomically.

@@ -60,12 +60,20 @@ def swept_joints(trajectory_ref) -> np.ndarray:
     return sw.astype(int)
 
 
+def attempt_swept_joints(attempt) -> np.ndarray:
+    """(t,) int: the joint swept at each recorded step of ``attempt``: its ``trajectory_joint`` when
+    it has one (the curl-back's moves between sweeps change references beyond the swept joint),
+    else recovered from its references by :func:`swept_joints`."""
+    tj = getattr(attempt, "trajectory_joint", None)
+    return np.asarray(tj, dtype=int) if tj is not None else swept_joints(attempt.trajectory_ref)
+
+
 def sweep_segments(attempt) -> dict[int, tuple[int, int]]:
     """{joint k: (first row, last row)} of each recorded sweep of an attempt (rows of
     ``attempt.trajectory``, inclusive).  The last row of a sweep is its detection step."""
     if attempt.trajectory is None or attempt.trajectory_ref is None:
         raise ValueError("the attempt has no trajectory; explore with ExploreConfig(record=True)")
-    sw = swept_joints(attempt.trajectory_ref)
+    sw = attempt_swept_joints(attempt)
     out = {}
     if len(sw) == 0:
         return out
@@ -507,7 +515,7 @@ def contact_quality(exploration, mesh, false_tol_m: float = FALSE_DETECTION_TOL_
     held_max, distal_max, held_per = 0.0, 0.0, []
     pen_traj = 0.0
     for a in atts:
-        sw = swept_joints(a.trajectory_ref)
+        sw = attempt_swept_joints(a)
         err = np.abs(a.trajectory - a.trajectory_ref)
         j = np.arange(n)[None, :]
         held = np.where(j < sw[:, None], err, 0.0).max(initial=0.0)

@@ -101,7 +101,7 @@ def replay_wrap(exploration, mesh, wrap: int) -> WrapReplay:
         robot.reseed((0, wrap))  # as explore() seeds the wrap
         obs = _ContactObservingRobot(world, robot)
         atts = run_wrap(obs, exploration.poses[wrap].T_world_base, exploration.band, attempts=cfg.attempts,
-                        base_step=cfg.base_step, cfg=cfg.control, record=True)
+                        base_step=cfg.base_step, cfg=cfg.control, record=True, curl=cfg.curl_back)
     log, starts = obs.log, obs.starts
     rec = exploration.attempts[wrap]
     identical = len(atts) == len(rec) and all(

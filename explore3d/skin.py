@@ -123,7 +123,7 @@ def ideal_skin(exploration, mesh) -> SkinContacts:
             robot.reseed((0, wi))  # as explore() seeds the wrap
             skin = _SkinRobot(world, robot, _wanted_steps(atts, cfg.sensors.delay_steps))
             again = run_wrap(skin, pose.T_world_base, exploration.band, attempts=cfg.attempts,
-                             base_step=cfg.base_step, cfg=cfg.control)
+                             base_step=cfg.base_step, cfg=cfg.control, curl=cfg.curl_back)
         if len(again) != len(atts) or not all(np.array_equal(a.q, b.q) for a, b in zip(again, atts)):
             raise RuntimeError(f"wrap {wi}: the re-run did not reproduce the recorded attempts; the ideal "
                                "skin needs the exploration's own mesh, arm and configuration")

@@ -1,9 +1,11 @@
 """Coverage benchmark of non-convex objects: explore3d.compare per object, one JSON per (object, label).
 
     python scripts/coverage_bench.py [--objects concave nonconvex | NAME ...] [--out runs/coverage]
-                                     [--label default] [--jobs 2]
+                                     [--label default] [--jobs 2] [--encircle straight|curl-back]
+                                     [--probes ROUNDS] [--no-free-space]
 
-For each object runs :func:`explore3d.compare.compare` once (the default 3D exploration: link
+For each object runs :func:`explore3d.compare.compare` once (the default 3D exploration, or the
+strategy chosen with ``--encircle``, ``--probes`` and ``--no-free-space`` as in ``explore3d compare``: link
 points, localised contacts, ideal skin all / loaded contacts) and writes ``OUT/OBJECT.LABEL.json``
 (written to a temporary file, then renamed).  Files already present are skipped, so a killed run
 rerun does only what is missing; a failure (no contact, no hull, ...) is recorded in its file with
@@ -77,15 +79,14 @@ def git_commit() -> str:
     return git("rev-parse", "--short", "HEAD") + ("-dirty" if dirty else "")
 
 
-def measure(name: str, label: str, jobs: int) -> dict:
-    from explore3d import ExploreConfig
+def measure(name: str, label: str, config) -> dict:
     from explore3d._quiet import quiet_c_output
     from explore3d.compare import compare
     from explore3d.explore import rough_bound
 
     mesh = load(name)
     centre, radius = rough_bound(mesh.vertices)
-    rec = {"object": name, "label": label, "commit": git_commit(), "centre_m": centre.tolist(), "radius_m": radius,
+    rec = {"object": name, "label": label, "commit": git_commit(), "argv": sys.argv[1:], "centre_m": centre.tolist(), "radius_m": radius,
            "centre_inside": bool(mesh.contains([centre])[0]), "volume_over_hull": mesh.volume / mesh.convex_hull.volume}
     try:
         rec["dense_samples_percent"] = dense_reference(mesh, centre)
@@ -94,7 +95,7 @@ def measure(name: str, label: str, jobs: int) -> dict:
     t0 = time.perf_counter()
     try:
         with quiet_c_output():
-            rec["report"] = compare(mesh, "default", ExploreConfig(jobs=jobs), centre=centre, radius=radius)
+            rec["report"] = compare(mesh, "default", config, centre=centre, radius=radius)
     except Exception as exc:  # noqa: BLE001 -- record and go on
         rec["error"] = f"{type(exc).__name__}: {exc}"
         rec["traceback"] = traceback.format_exc()
@@ -149,7 +150,22 @@ def main():
     ap.add_argument("--out", type=Path, default=Path("runs/coverage"), help="output folder")
     ap.add_argument("--label", default="default", help="name of the method/setting measured (default 'default')")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes per exploration (default 2)")
+    ap.add_argument("--encircle", choices=("straight", "curl-back"), default="straight",
+                    help="how each attempt encircles (default straight)")
+    ap.add_argument("--probes", type=int, default=None, help="rounds of probes (default: ExploreConfig's, 3)")
+    ap.add_argument("--no-free-space", dest="no_free_space", action="store_true",
+                    help="neither record the swept space nor carve (implies --probes 0)")
     args = ap.parse_args()
+    import dataclasses
+
+    from explore3d.cli import explore_config
+
+    opts = {"jobs": args.jobs, "encircle": args.encircle}
+    if args.probes is not None or args.no_free_space:
+        opts["probes"] = 0 if args.no_free_space else args.probes
+    config = explore_config(opts)
+    if args.no_free_space:
+        config = dataclasses.replace(config, free_space=False)
     names = list(dict.fromkeys(n for o in args.objects for n in GROUPS.get(o, (o,))))
     args.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -159,7 +175,7 @@ def main():
             print(f"{name}: {path} present, skipped", file=sys.stderr, flush=True)
             continue
         print(f"{name}: exploring ...", file=sys.stderr, flush=True)
-        rec = measure(name, args.label, args.jobs)
+        rec = measure(name, args.label, config)
         write_json(path, rec)
         print(f"{name}: {rec.get('error', 'done')} ({rec['wall_s']:.0f} s)", file=sys.stderr, flush=True)
     print(f"total {time.perf_counter() - t0:.0f} s", file=sys.stderr)

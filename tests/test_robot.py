@@ -246,6 +246,12 @@ ORACLE_FREE = textwrap.dedent("""
     # the hull took contacts localised from the settled readings, their heights resolved
     assert ex.config.points == "contacts" and ex.contacts.used.sum() == len(ex.points) >= 4
     assert np.array_equal(ex.points, ex.contacts.points[ex.contacts.used])
+    # the curl-back encirclement too: its hairpin moves between sweeps happened
+    from explore3d.encircle import CurlBack
+    from explore3d.explore import explore
+    cb = explore(cube(), arm, ExploreConfig(directions=3, angles=1, jobs=2, record=True, probes=None,
+                                            curl_back=CurlBack()))
+    assert cb.n_contacts > 0 and any((a.trajectory_ref < -0.3).any() for w in cb.attempts for a in w)
     print("ORACLE-FREE-OK", ex.n_contacts, len(ex.points), round(res.error.percent, 2))
 """)
 
@@ -255,7 +261,7 @@ def test_exploration_runs_with_every_world_query_removed_from_pybullet(tmp_path)
     alias bound at import time escapes; a 3D exploration with gravity compensation, two worker
     processes, the contact localisation, the free space, a round of probes aimed from the estimate,
     self-contacts ending attempts and the carved reconstruction runs in that process and its
-    workers."""
+    workers; so does a curl-back exploration."""
     env = {**os.environ, "EXPLORE3D_CACHE_DIR": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", ORACLE_FREE.format(names=WORLD_QUERIES)], capture_output=True,
                          text=True, env=env, cwd=tmp_path, timeout=600)
