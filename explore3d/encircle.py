@@ -28,7 +28,7 @@ import numpy as np
 from ._validate import check_field
 from .arm import ArmSpec
 from .detect import ContactBand, SweepDetector
-from .kinematics import gravity_torques
+from .kinematics import gravity_torques, link_frames_planar
 from .robot import JointCommand, JointReading, Robot
 from .selfcontact import SELF_CONTACT_TOLERANCE_M, self_contact_pairs, self_distances
 
@@ -198,7 +198,8 @@ class CurlBack:
     section), the short finger reaches in.  The curl is a hairpin of joints bent outward (negative
     angles) by equal amounts totalling ``turn``; the links beyond it are straight, running back
     beside the chain, away from the object.  Between sweeps the arm moves to the next curl at the
-    controller's ``speed`` with every motor's full torque (the motion only turns links away from
+    controller's ``speed`` and ``tip_speed`` (:meth:`Controller.move`) with every motor's full
+    torque (the motion only turns links away from
     the object, or straightens the finger's next link as the straight sweep's chain starts).
 
     Attributes:
@@ -356,15 +357,32 @@ class Controller:
         return q
 
     def move(self, q_from, q_to) -> np.ndarray:
-        """Move the references from ``q_from`` to ``q_to`` (n,), rad, on a cosine profile whose
-        fastest joint peaks at the controller's ``speed``, with every motor's full torque; then
-        settle (:meth:`settle`).  Returns the last reading's angles."""
+        """Move the references from ``q_from`` to ``q_to`` (n,), rad, on a cosine profile with
+        every motor's full torque, then settle (:meth:`settle`); returns the last reading's angles.
+
+        The profile's peak speed is the controller's ``speed`` for the fastest joint and, as for
+        the sweeps, ``tip_speed`` for the fastest point of the chain (its path, in the arm's own
+        model, along the interpolation).  Measured: with the joint speed alone (3 rad/s) the
+        curl-back's first hairpin swung 19 links through 180 degrees in 0.15 s; on the capsule the
+        chain, pressed against the object, blew up (joints jumping 0.4 rad per step, past their
+        limits) and a link passed through the object, whose swept space then carved the estimate
+        (11.7% against 2.0% volume error).
+        """
         q_from, q_to = np.asarray(q_from, float), np.asarray(q_to, float)
         span = float(np.max(np.abs(q_to - q_from), initial=0.0))
-        steps = math.ceil(math.pi / 2 * span / (self.cfg.speed * self.robot.dt))
+        duration = span / self.cfg.speed
+        if self.cfg.tip_speed is not None and span > 0:
+            s = np.linspace(0.0, 1.0, 17)[:, None]
+            origins, headings = link_frames_planar(self.spec, q_from + s * (q_to - q_from))
+            tip = origins[:, -1] + self.spec.link_length * np.stack([np.cos(headings[:, -1]),
+                                                                     np.sin(headings[:, -1])], axis=-1)
+            pts = np.concatenate([origins, tip[:, None]], axis=1)  # (17, n + 1, 2)
+            path = np.linalg.norm(np.diff(pts, axis=0), axis=-1).sum(axis=0).max()
+            duration = max(duration, float(path) / self.cfg.tip_speed)
+        steps = math.ceil(math.pi / 2 * duration / self.robot.dt)
         for i in range(1, steps + 1):
-            s = 0.5 - 0.5 * math.cos(math.pi * i / steps)
-            self.send(q_from + s * (q_to - q_from))
+            f = 0.5 - 0.5 * math.cos(math.pi * i / steps)
+            self.send(q_from + f * (q_to - q_from))
         self.settle(q_to)
         return self.reading.q
 
