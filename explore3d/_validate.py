@@ -2,6 +2,8 @@
 naming the expected and the actual."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 
@@ -67,3 +69,30 @@ def check_field(owner, name: str, lo: float | None = None, unit: str = "", stric
         rng += "" if hi is None else f" and <= {hi:g}"
         unit = f" {unit}" if unit else ""
         raise ValueError(f"{type(owner).__name__}.{name} must be {what}{rng}{unit}; got {v!r}")
+
+
+def read_toml(path, what: str, flag: str) -> dict:
+    """The table of the TOML file ``path`` (tomllib, or tomli on Python 3.10).  ``what`` names the
+    file in messages (e.g. "config file"), ``flag`` the option that gave it (e.g. "--config").
+
+    Raises:
+        ValueError: one line naming the problem and the fix (no TOML reader, missing or
+            unreadable file, invalid TOML).
+    """
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        try:
+            import tomli as tomllib
+        except ModuleNotFoundError:
+            raise ValueError(f"{flag} needs Python 3.11 (tomllib) or pip install tomli; "
+                             "pass the options as flags instead") from None
+    path = Path(path)
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ValueError(f"{what} not found: {path}; check the {flag} path") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"cannot read {what} {path}: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{what} {path} is not valid TOML ({exc}); fix the syntax") from None

@@ -200,20 +200,13 @@ def _check_bool(v, name):
 
 def read_toml_config(path) -> dict:
     """Options for ``run`` from a TOML file (keys as in :data:`RUN_OPTIONS`, '-' or '_'), checked."""
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10 (pyproject allows it); tomllib is 3.11+
-        raise UsageError("--config needs Python 3.11 or newer (tomllib); pass the options as flags instead") from None
+    from ._validate import read_toml
 
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise UsageError(f"config file not found: {path}; check the --config path") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UsageError(f"cannot read config {path}: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UsageError(f"config {path} is not valid TOML ({exc}); fix the syntax") from None
+        data = read_toml(path, "config file", "--config")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     out = {}
     for k, v in data.items():
         key = k.replace("-", "_")

@@ -168,23 +168,10 @@ def parse_grid(items) -> dict:
 def read_grid_file(path) -> dict:
     """A grid from a TOML file: top-level ``KEY = value`` or ``KEY = [v1, v2, ...]`` (keys of
     :data:`SWEEP_KEYS`), checked as :func:`parse_grid` checks flags."""
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        try:
-            import tomli as tomllib
-        except ModuleNotFoundError:
-            raise ValueError("--grid-file needs Python 3.11 (tomllib) or pip install tomli; "
-                             "or pass the grid as --grid KEY=V1,V2") from None
+    from ._validate import read_toml
+
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ValueError(f"grid file not found: {path}; check the --grid-file path") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"cannot read grid file {path}: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"grid file {path} is not valid TOML ({exc}); fix the syntax") from None
+    data = read_toml(path, "grid file", "--grid-file")
     grid = {}
     for k, v in data.items():
         key = k.replace("-", "_")
