@@ -17,7 +17,7 @@ import numpy as np
 from .defaults import DEFAULT_A
 from .explore import ExploreConfig
 
-__all__ = ["CompareColumn", "compare", "format_compare"]
+__all__ = ["CompareColumn", "compare", "compare_exploration", "format_compare"]
 
 
 @dataclass(frozen=True)
@@ -164,15 +164,33 @@ def compare(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: flo
         ``explore_s`` and ``skin_s`` (wall-clock seconds).
     """
     import dataclasses
-    import time
 
-    from .explore import contact_points, explore
-    from .pipeline import NoContactError, planar_truth, rough_bound_or
-    from .skin import ideal_skin
+    from .explore import explore
+    from .pipeline import rough_bound_or
 
     config = dataclasses.replace(config, points="contacts")
     centre, radius = rough_bound_or(mesh, centre, radius)
     ex = explore(mesh, arm, config, centre=centre, radius=radius, progress=progress)
+    return compare_exploration(ex, mesh, centre, radius, a=a, seed=seed)
+
+
+def compare_exploration(ex, mesh, centre, radius: float, a: float = DEFAULT_A, *, seed: int = 0, skin=None) -> dict:
+    """Score an exploration ``ex`` (made with ``config.points="contacts"``) of ``mesh`` as
+    :func:`compare` does (same dict), without exploring again: e.g. to keep ``ex``'s contacts and
+    free space.  ``centre`` (3,) and ``radius`` (m) are the rough bound it was explored with;
+    ``skin``: ``ideal_skin(ex, mesh)`` when already computed (else computed here)."""
+    import dataclasses
+    import time
+
+    from .explore import contact_points
+    from .pipeline import NoContactError, planar_truth
+    from .skin import ideal_skin
+
+    config = ex.config
+    if config.points != "contacts":
+        raise ValueError(f"compare_exploration needs an exploration with config.points='contacts'; got "
+                         f"{config.points!r}: explore with dataclasses.replace(config, points='contacts')")
+    centre = np.asarray(centre, dtype=float)
     if ex.n_contacts == 0:
         raise NoContactError("the arm made no contact with the object: nothing to compare; use a longer arm, a "
                              "smaller object or a correct rough bound", exploration=ex)
@@ -180,7 +198,7 @@ def compare(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: flo
            "method": "exponential", "swept": list(ex.swept),
            "truth": planar_truth(mesh, float(centre[2])) if config.mode == "planar" else mesh}
     t0 = time.perf_counter()
-    skin = ideal_skin(ex, mesh)
+    skin = ideal_skin(ex, mesh) if skin is None else skin
     skin_s = time.perf_counter() - t0
     link_cfg = dataclasses.replace(config, points="links")
     L, Lw, _, _ = contact_points(ex.spec, ex.attempts, link_cfg)

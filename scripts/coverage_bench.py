@@ -2,14 +2,17 @@
 
     python scripts/coverage_bench.py [--objects concave nonconvex | NAME ...] [--out runs/coverage]
                                      [--label default] [--jobs 2] [--encircle straight|curl-back]
-                                     [--probes ROUNDS] [--no-free-space]
+                                     [--probes ROUNDS] [--no-free-space] [--save]
 
 For each object runs :func:`explore3d.compare.compare` once (the default 3D exploration, or the
 strategy chosen with ``--encircle``, ``--probes`` and ``--no-free-space`` as in ``explore3d compare``: link
 points, localised contacts, ideal skin all / loaded contacts) and writes ``OUT/OBJECT.LABEL.json``
 (written to a temporary file, then renamed).  Files already present are skipped, so a killed run
 rerun does only what is missing; a failure (no contact, no hull, ...) is recorded in its file with
-its reason and the run goes on.  Each file also holds a reference, "dense samples": the same
+its reason and the run goes on.  With ``--save`` the exploration's hull points
+(``OUT/OBJECT.LABEL/points.ply``, as ``explore3d run`` writes them), its free space
+(``free_space.npz``) and the ideal skin's points (``skin.npz``: points, wrap, loaded) are kept
+too, for estimators measured on the same contacts (scripts/estimator_study.py).  Each file also holds a reference, "dense samples": the same
 inverse hull (a = DEFAULT_A, about the rough centre) of 5000 points sampled uniformly on the true
 surface (seed 0) -- what the estimator could give if the arm touched everywhere.
 
@@ -79,10 +82,25 @@ def git_commit() -> str:
     return git("rev-parse", "--short", "HEAD") + ("-dirty" if dirty else "")
 
 
-def measure(name: str, label: str, config) -> dict:
+def save_exploration(ex, skin, folder: Path) -> None:
+    """Keep ``ex``'s hull points, free space and ideal-skin points in ``folder``."""
+    from explore3d.freespace import save_swept
+    from explore3d.pipeline import write_exploration_points
+
+    folder.mkdir(parents=True, exist_ok=True)
+    write_exploration_points(ex, folder / "points.ply")
+    if ex.swept:
+        save_swept(ex.swept, folder / "free_space.npz")
+    np.savez_compressed(folder / "skin.npz", points=skin.points, wrap=skin.wrap, loaded=skin.loaded)
+
+
+def measure(name: str, label: str, config, save: Path | None = None) -> dict:
+    import dataclasses
+
     from explore3d._quiet import quiet_c_output
-    from explore3d.compare import compare
-    from explore3d.explore import rough_bound
+    from explore3d.compare import compare_exploration
+    from explore3d.explore import explore, rough_bound
+    from explore3d.skin import ideal_skin
 
     mesh = load(name)
     centre, radius = rough_bound(mesh.vertices)
@@ -95,7 +113,11 @@ def measure(name: str, label: str, config) -> dict:
     t0 = time.perf_counter()
     try:
         with quiet_c_output():
-            rec["report"] = compare(mesh, "default", config, centre=centre, radius=radius)
+            ex = explore(mesh, "default", dataclasses.replace(config, points="contacts"), centre=centre, radius=radius)
+            skin = ideal_skin(ex, mesh)
+            rec["report"] = compare_exploration(ex, mesh, centre, radius, skin=skin)
+            if save is not None:
+                save_exploration(ex, skin, save)
     except Exception as exc:  # noqa: BLE001 -- record and go on
         rec["error"] = f"{type(exc).__name__}: {exc}"
         rec["traceback"] = traceback.format_exc()
@@ -155,6 +177,8 @@ def main():
     ap.add_argument("--probes", type=int, default=None, help="rounds of probes (default: ExploreConfig's, 3)")
     ap.add_argument("--no-free-space", dest="no_free_space", action="store_true",
                     help="neither record the swept space nor carve (implies --probes 0)")
+    ap.add_argument("--save", action="store_true",
+                    help="keep each exploration's points, free space and skin points in OUT/OBJECT.LABEL/")
     args = ap.parse_args()
     import dataclasses
 
@@ -175,7 +199,7 @@ def main():
             print(f"{name}: {path} present, skipped", file=sys.stderr, flush=True)
             continue
         print(f"{name}: exploring ...", file=sys.stderr, flush=True)
-        rec = measure(name, args.label, config)
+        rec = measure(name, args.label, config, args.out / f"{name}.{args.label}" if args.save else None)
         write_json(path, rec)
         print(f"{name}: {rec.get('error', 'done')} ({rec['wall_s']:.0f} s)", file=sys.stderr, flush=True)
     print(f"total {time.perf_counter() - t0:.0f} s", file=sys.stderr)
