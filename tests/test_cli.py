@@ -231,6 +231,28 @@ def test_reconstruct_sphere_points(tmp_path, capsys):
     assert m.volume == pytest.approx(trimesh.convex.convex_hull(P).volume, rel=1e-4)
 
 
+def test_reconstruct_implicit_estimator_reads_the_normals(tmp_path, capsys):
+    """--estimator implicit fits the points and their nx, ny, nz; without normals it says so."""
+    from explore3d import load_object
+    from explore3d.export import write_points_ply
+
+    mesh = load_object("l_block")
+    P, fi = trimesh.sample.sample_surface(mesh, 3000, seed=np.random.default_rng(0))
+    N = mesh.face_normals[fi]
+    write_points_ply(P, tmp_path / "n.ply", extra={"nx": N[:, 0], "ny": N[:, 1], "nz": N[:, 2]})
+    code, _, err = run(capsys, "reconstruct", str(tmp_path / "n.ply"), "--out", str(tmp_path / "m.obj"),
+                       "--estimator", "implicit")
+    assert code == 0, err
+    est = trimesh.load(str(tmp_path / "m.obj"))
+    assert est.is_watertight
+    assert abs(est.volume - mesh.volume) / mesh.volume < 0.05  # the L, which the hull about its midrange bridges
+    write_points_ply(P, tmp_path / "p.ply")
+    code, _, err = run(capsys, "reconstruct", str(tmp_path / "p.ply"), "--out", str(tmp_path / "m.obj"),
+                       "--estimator", "implicit")
+    assert code == 2
+    assert_one_line_error(err, "normals")
+
+
 def test_reconstruct_planar_points_to_polygon(tmp_path, capsys):
     from explore3d.export import write_points_ply
 
