@@ -23,7 +23,7 @@ import numpy as np
 from ._validate import check_field
 from .directions import WrapPose, wrap_pose
 
-__all__ = ["ProbeConfig", "unsupported_targets", "probe_poses"]
+__all__ = ["ProbeConfig", "unsupported_targets", "probe_poses", "finger_poses"]
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,10 @@ class ProbeConfig:
             10.5% (150 wraps): a round aimed at one region may change little while the next, aimed
             elsewhere, does).
         samples: surface samples of the estimate per round (seeded).
+        fingers: finger probes (:func:`finger_poses`) at up to this many targets per round
+            (their own, chosen like the wraps' but apart from earlier fingers' targets; 0: none):
+            the straight arm laid alongside the target's surface through space the estimate leaves
+            empty (a channel the free space carved), brought onto the surface by the sweep.
     """
 
     rounds: int = 3
@@ -58,6 +62,7 @@ class ProbeConfig:
     exclusion_m: float | None = None
     min_change: float = 0.0
     samples: int = 4000
+    fingers: int = 0
 
     def __post_init__(self):
         for name, lo in (("rounds", 0), ("targets", 1), ("orientations", 1), ("samples", 10)):
@@ -68,6 +73,7 @@ class ProbeConfig:
         check_field(self, "min_change", 0)
         if not isinstance(self.across, bool):
             raise ValueError(f"ProbeConfig.across must be True or False; got {self.across!r}")
+        check_field(self, "fingers", 0, integer=True)
 
 
 def unsupported_targets(mesh, contacts, min_distance_m: float, exclusion_m: float, k: int, previous=None,
@@ -140,4 +146,68 @@ def probe_poses(targets, normals, centre, radius: float, arm_width: float, orien
             x = np.cross(y, ns)
             out.append(wrap_pose(centre, np.stack([x, y, ns], axis=1), offset, r, arm_width, clearance, r, ns, 0.0,
                                  f"{label} t{ti} across s{offset * 1000:+.0f}mm"))
+    return out
+
+
+def finger_poses(targets, normals, estimate, centre, radius: float, spec, gap_m: float = 0.003,
+                 directions: int = 200, max_tilt: float = math.radians(15.0), step_m: float = 0.002,
+                 label: str = "finger") -> list[WrapPose]:
+    """Finger probes: for each target (t, 3) on the estimate with outward normal (t, 3), the
+    straight arm laid alongside the target's surface, its tip ``gap_m`` plus half a link width off
+    it, through space the estimate (closed trimesh, metres) leaves empty -- a channel carved by the
+    free space, or the outside -- so the sweep brings the arm onto the surface from within a
+    concavity the wraps only bridged, and the space it sweeps on the way reaches the surface.
+
+    Candidate arm directions ``e`` (the arm's +x, base to tip) are ``directions`` evenly spread
+    unit vectors (:func:`~explore3d.directions.fibonacci_sphere`) within ``max_tilt`` of the
+    target's tangent plane.  One is feasible when the straight arm's cross-section (link width x
+    height, plus ``gap_m`` all round), sampled every ``step_m`` along it, lies wholly outside the
+    estimate and its base outside the rough bound (centre (3,), radius m).  Of the feasible ones
+    the arm that runs longest alongside the estimate's surface (stations within a link width plus
+    two gaps of it) is taken, then the least tilted, then the first; a target with none gets no
+    finger.  The arm curls towards the surface: the wrap frame's +y is the normal's opposite
+    projected across ``e``.  Pure geometry on the estimate (what the robot believes).
+    """
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    from .directions import fibonacci_sphere
+
+    centre = np.asarray(centre, dtype=float)
+    L = spec.n_links * spec.link_length
+    half_w, half_h = spec.link_width / 2 + gap_m, spec.link_height / 2 + gap_m
+    E = fibonacci_sphere(directions)
+    s = np.arange(0.0, L + 1e-12, step_m)
+    S, _ = trimesh.sample.sample_surface(estimate, 4000, seed=0)
+    near = cKDTree(S)
+    corners = [(a, b) for a in (-half_w, 0.0, half_w) for b in (-half_h, 0.0, half_h)]
+    out = []
+    for ti, (p, n) in enumerate(zip(np.asarray(targets, float), np.asarray(normals, float))):
+        n = n / np.linalg.norm(n)
+        tip = p + (spec.link_width / 2 + gap_m) * n
+        tilt = np.abs(E @ n)
+        best = None
+        for i in np.nonzero(tilt <= math.sin(max_tilt))[0]:
+            e = E[i]
+            y = -(n - (n @ e) * e)
+            y /= np.linalg.norm(y)
+            m = np.cross(e, y)
+            base = tip - L * e
+            if np.linalg.norm(base - centre) <= radius:
+                continue
+            line = base + s[:, None] * e
+            line = line[np.linalg.norm(line - centre, axis=1) <= radius + half_w + half_h]
+            if not len(line):
+                continue
+            if estimate.contains(np.concatenate([line + a * y + b * m for a, b in corners])).any():
+                continue
+            along = int((near.query(line)[0] <= spec.link_width + 2 * gap_m).sum())
+            key = (-along, float(tilt[i]), int(i))
+            if best is None or key < best[0]:
+                best = (key, e, y, m, base, i)
+        if best is not None:
+            _, e, y, m, base, i = best
+            T = np.eye(4)
+            T[:3, :3], T[:3, 3] = np.stack([e, y, m], axis=1), base
+            out.append(WrapPose(T, m, float((base - centre) @ m), 0.0, f"{label} t{ti} e{i}"))
     return out

@@ -180,6 +180,8 @@ RUN_OPTIONS = {
     "points": _choice("points", ("contacts", "links")),
     # rounds of probe wraps aimed at the estimate's least supported surface (3d; 0: none)
     "probes": _int_min("--probes", 0),
+    # finger probes per round: the straight arm laid alongside unsupported surface in carved space
+    "fingers": _int_min("--fingers", 0),
     # how each attempt encircles: the paper's straight sweep or its proposed curl-back
     "encircle": _choice("encircle", ("straight", "curl-back")),
     # outputs
@@ -285,6 +287,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--probes", type=RUN_OPTIONS["probes"], metavar="ROUNDS",
                    help="3d: at most this many rounds of probe wraps through the estimate's least supported "
                         "surface after the first wraps (default 3; 0: none)")
+    r.add_argument("--fingers", type=RUN_OPTIONS["fingers"], metavar="N",
+                   help="3d: finger probes per round of probes: the straight arm laid alongside unsupported "
+                        "surface through space the estimate leaves empty, then swept onto it (default 0)")
     r.add_argument("--encircle", type=RUN_OPTIONS["encircle"],
                    help="straight (default: every joint sweeps the straight chain beyond it, the paper's method) "
                         "or curl-back (after the first contact the chain beyond a few straight links curls away "
@@ -353,6 +358,8 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--angles", type=RUN_OPTIONS["angles"], help="3d: approach angles per plane")
     k.add_argument("--probes", type=RUN_OPTIONS["probes"], metavar="ROUNDS",
                    help="3d: rounds of probe wraps aimed at the estimate (default 3; 0: none)")
+    k.add_argument("--fingers", type=RUN_OPTIONS["fingers"], metavar="N",
+                   help="3d: finger probes per round of probes (default 0)")
     k.add_argument("--encircle", type=RUN_OPTIONS["encircle"], help="straight (default) or curl-back")
     k.add_argument("--no-free-space", dest="no_free_space", action="store_true",
                    help="3d: neither record the swept space nor carve with it (the paper's hull of the straight "
@@ -471,10 +478,18 @@ def explore_config(opts: dict):
             kw["sensors"] = SensorConfig.ideal()
         if opts.get("collision_margin") is not None:
             kw["sim"] = SimConfig(collision_margin=opts["collision_margin"])
-        if opts.get("probes") is not None:
+        if opts.get("probes") is not None or opts.get("fingers") is not None:
+            import dataclasses
+
             from .active import ProbeConfig
 
-            kw["probes"] = ProbeConfig(rounds=opts["probes"]) if opts["probes"] else None
+            probes = ProbeConfig() if opts.get("probes") is None else ProbeConfig(rounds=opts["probes"])
+            if opts.get("fingers") is not None:
+                if not probes.rounds and opts["fingers"]:
+                    raise ValueError("--fingers places finger probes in the rounds of probes: give --probes >= 1 "
+                                     "(or leave --probes at its default)")
+                probes = dataclasses.replace(probes, fingers=opts["fingers"])
+            kw["probes"] = probes if probes.rounds else None
         if opts.get("encircle") == "curl-back":
             from .encircle import CurlBack
 
@@ -722,7 +737,8 @@ def cmd_compare(args) -> int:
     from ._quiet import quiet_c_output
 
     _check_object_name(args.object)
-    opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs", "probes", "encircle")
+    opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs", "probes", "fingers",
+                                          "encircle")
             if getattr(args, k) is not None}
     config = explore_config({**opts, "probes": 0} if args.no_free_space else opts)
     if args.no_free_space:

@@ -370,12 +370,13 @@ def current_estimate(spec, config, centre, radius, poses, results):
 def _probe_rounds(spec, config, centre, radius, poses, results, run_poses) -> list[dict]:
     """Rounds of probes (:mod:`explore3d.active`): wraps through the estimate's least supported
     surface until a round changes its volume by less than ``min_change`` or none is left."""
-    from .active import probe_poses, unsupported_targets
+    from .active import finger_poses, probe_poses, unsupported_targets
 
     pc = config.probes
     d_min = spec.link_length if pc.min_distance_m is None else pc.min_distance_m
     excl = spec.link_height if pc.exclusion_m is None else pc.exclusion_m
     rounds, previous, volume = [], np.zeros((0, 3)), None
+    previous_fingers = np.zeros((0, 3))
     for k in range(pc.rounds):
         t0 = time.perf_counter()
         try:
@@ -392,6 +393,10 @@ def _probe_rounds(spec, config, centre, radius, poses, results, run_poses) -> li
             break
         new = probe_poses(targets, normals, centre, radius, spec.link_width, pc.orientations, config.clearance,
                           label=f"probe r{k}", across_depth_m=spec.link_height / 2 if pc.across else None)
+        if pc.fingers:
+            ft, fn, _ = unsupported_targets(est, pts, d_min, excl, pc.fingers, previous_fingers, pc.samples, seed=k)
+            new += finger_poses(ft, fn, est, centre, radius, spec, label=f"finger r{k}")
+            previous_fingers = np.vstack([previous_fingers, ft])
         poses.extend(new)
         run_poses(new)
         previous = np.vstack([previous, targets])

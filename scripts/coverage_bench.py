@@ -2,10 +2,10 @@
 
     python scripts/coverage_bench.py [--objects concave nonconvex | NAME ...] [--out runs/coverage]
                                      [--label default] [--jobs 2] [--encircle straight|curl-back]
-                                     [--probes ROUNDS] [--no-free-space] [--save]
+                                     [--probes ROUNDS] [--fingers N] [--no-free-space] [--save]
 
 For each object runs :func:`explore3d.compare.compare` once (the default 3D exploration, or the
-strategy chosen with ``--encircle``, ``--probes`` and ``--no-free-space`` as in ``explore3d compare``: link
+strategy chosen with ``--encircle``, ``--probes``, ``--fingers`` and ``--no-free-space`` as in ``explore3d compare``: link
 points, localised contacts, ideal skin all / loaded contacts) and writes ``OUT/OBJECT.LABEL.json``
 (written to a temporary file, then renamed).  Files already present are skipped, so a killed run
 rerun does only what is missing; a failure (no contact, no hull, ...) is recorded in its file with
@@ -175,6 +175,7 @@ def main():
     ap.add_argument("--encircle", choices=("straight", "curl-back"), default="straight",
                     help="how each attempt encircles (default straight)")
     ap.add_argument("--probes", type=int, default=None, help="rounds of probes (default: ExploreConfig's, 3)")
+    ap.add_argument("--fingers", type=int, default=None, help="finger probes per round (default: ExploreConfig's, 0)")
     ap.add_argument("--no-free-space", dest="no_free_space", action="store_true",
                     help="neither record the swept space nor carve (implies --probes 0)")
     ap.add_argument("--save", action="store_true",
@@ -187,6 +188,8 @@ def main():
     opts = {"jobs": args.jobs, "encircle": args.encircle}
     if args.probes is not None or args.no_free_space:
         opts["probes"] = 0 if args.no_free_space else args.probes
+    if args.fingers is not None:
+        opts["fingers"] = args.fingers
     config = explore_config(opts)
     if args.no_free_space:
         config = dataclasses.replace(config, free_space=False)

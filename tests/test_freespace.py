@@ -120,11 +120,44 @@ def test_unsupported_targets_and_their_planes():
         assert abs(abs(n @ z) - 1) < 1e-9 and abs((p - 0.005 * n - o) @ z) < 1e-9  # across, 5 mm beneath
 
 
+def test_finger_lies_alongside_the_slot_wall_in_empty_space_and_curls_onto_it():
+    """The U-channel as the estimate, a target on a slot wall: the finger's straight arm (link
+    cross-section plus the gap) lies outside the estimate, its base outside the rough bound, the
+    arm runs along the wall and curls towards it; a target on the wall of a closed pocket gets none."""
+    from explore3d.active import finger_poses
+    from explore3d.arm import load_arm
+    from explore3d.kinematics import link_transforms
+    from explore3d.objects import u_channel
+
+    spec = load_arm("default")
+    u = u_channel()  # slot x in [-20, 20] mm, open towards +y, along z
+    p, n = np.array([-0.02, 0.01, 0.0]), np.array([1.0, 0.0, 0.0])  # on the slot's left wall
+    (pose,) = finger_poses([p], [n], u, np.zeros(3), 0.075, spec)
+    T = pose.T_world_base
+    assert np.linalg.norm(T[:3, 3]) > 0.075
+    e, y = T[:3, 0], T[:3, 1]
+    assert abs(e @ n) < np.sin(np.radians(15)) + 1e-9 and y @ n < -0.9  # alongside, curling onto the wall
+    frames = link_transforms(spec, np.zeros(spec.n_links), T)
+    s = np.linspace(0, spec.link_length, 5)
+    axis = (frames[:, None, :3, 3] + s[None, :, None] * frames[:, None, :3, 0]).reshape(-1, 3)
+    assert not u.contains(axis).any()
+    tip = frames[-1, :3, 3] + spec.link_length * frames[-1, :3, 0]
+    assert np.linalg.norm(tip - p) < 0.02  # the tip beside the target
+    in_slot = axis[(np.abs(axis[:, 0]) < 0.02) & (axis[:, 1] > -0.02) & (axis[:, 1] < 0.04) & (np.abs(axis[:, 2]) < 0.04)]
+    assert len(in_slot) and np.abs(in_slot[:, 0] - p[0]).max() < 0.012  # along the wall, not across the slot
+    # a closed pocket: a box with a sealed cavity, the target on the cavity's wall
+    box = trimesh.creation.box((0.08, 0.08, 0.08)).difference(trimesh.creation.box((0.03, 0.03, 0.03)),
+                                                               engine="manifold")
+    assert finger_poses([[-0.015, 0.0, 0.0]], [[1.0, 0.0, 0.0]], box, np.zeros(3), 0.075, spec) == []
+
+
 def test_probe_config_rejects_bad_values():
     with pytest.raises(ValueError, match="rounds"):
         ProbeConfig(rounds=-1)
     with pytest.raises(ValueError, match="min_distance_m"):
         ProbeConfig(min_distance_m=0.0)
+    with pytest.raises(ValueError, match="fingers"):
+        ProbeConfig(fingers=-1)
 
 
 def test_the_swept_space_of_a_real_exploration_never_holds_the_object():
