@@ -289,7 +289,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "surface after the first wraps (default 3; 0: none)")
     r.add_argument("--fingers", type=RUN_OPTIONS["fingers"], metavar="N",
                    help="3d: finger probes per round of probes: the straight arm laid alongside unsupported "
-                        "surface through space the estimate leaves empty, then swept onto it (default 0)")
+                        "surface through space the estimate leaves empty, then swept onto it (default 12; 0: none)")
     r.add_argument("--encircle", type=RUN_OPTIONS["encircle"],
                    help="straight (default: every joint sweeps the straight chain beyond it, the paper's method) "
                         "or curl-back (after the first contact the chain beyond a few straight links curls away "
@@ -359,7 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--probes", type=RUN_OPTIONS["probes"], metavar="ROUNDS",
                    help="3d: rounds of probe wraps aimed at the estimate (default 3; 0: none)")
     k.add_argument("--fingers", type=RUN_OPTIONS["fingers"], metavar="N",
-                   help="3d: finger probes per round of probes (default 0)")
+                   help="3d: finger probes per round of probes (default 12; 0: none)")
     k.add_argument("--encircle", type=RUN_OPTIONS["encircle"], help="straight (default) or curl-back")
     k.add_argument("--no-free-space", dest="no_free_space", action="store_true",
                    help="3d: neither record the swept space nor carve with it (the paper's hull of the straight "

@@ -175,7 +175,7 @@ def main():
     ap.add_argument("--encircle", choices=("straight", "curl-back"), default="straight",
                     help="how each attempt encircles (default straight)")
     ap.add_argument("--probes", type=int, default=None, help="rounds of probes (default: ExploreConfig's, 3)")
-    ap.add_argument("--fingers", type=int, default=None, help="finger probes per round (default: ExploreConfig's, 0)")
+    ap.add_argument("--fingers", type=int, default=None, help="finger probes per round (default: ExploreConfig's, 12)")
     ap.add_argument("--no-free-space", dest="no_free_space", action="store_true",
                     help="neither record the swept space nor carve (implies --probes 0)")
     ap.add_argument("--save", action="store_true",
