@@ -223,16 +223,33 @@ def _nnls(A: np.ndarray, b: np.ndarray, maxiter: int):
     return x, rnorm
 
 
+_RIDGE_ROWS: dict = {}
+
+
+def _ridge_rows(ridge: float, k: int) -> np.ndarray:
+    """(k, k) ``sqrt(ridge) * I``, kept (read only) per (ridge, k): a localisation fits thousands of times."""
+    key = (ridge, k)
+    if key not in _RIDGE_ROWS:
+        rows = np.sqrt(ridge) * np.eye(k)
+        rows.flags.writeable = False
+        _RIDGE_ROWS[key] = rows
+    return _RIDGE_ROWS[key]
+
+
 def _fit_module(cols: list, tau: np.ndarray, fmax: float = MAX_FORCE_N, ridge: float = 0.0):
     if not cols:
         return np.zeros(0), float(tau @ tau)
-    A = np.concatenate(cols, axis=1)
-    k = A.shape[1]
+    k = sum(c.shape[1] for c in cols)
     if ridge > 0:  # a small penalty on the forces: among explanations the data cannot tell apart
         # (e.g. a straight proximal chain does not see the force along itself) the gentlest wins
-        A = np.concatenate([A, np.sqrt(ridge) * np.eye(k)], axis=0)
+        n = len(tau)
+        A = np.empty((n + k, k))
+        np.concatenate(cols, axis=1, out=A[:n])
+        A[n:] = _ridge_rows(ridge, k)
         tau = np.concatenate([tau, np.zeros(k)])
-    x, rnorm = _nnls(np.ascontiguousarray(A, dtype=np.float64), np.asarray(tau, dtype=np.float64), 50 * k)
+    else:
+        A = np.concatenate(cols, axis=1)
+    x, rnorm = _nnls(A, np.asarray(tau, dtype=np.float64), 50 * k)
     if x.size and x.max() > fmax:
         return x, float("inf")
     return x, float(rnorm * rnorm)
