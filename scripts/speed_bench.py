@@ -4,7 +4,7 @@ run, several code trees interleaved (A, B, A, B, ...) so that they share the mac
     python scripts/speed_bench.py --trees /work/wt-a819 /work/wt-speed --objects cube sphere --repeats 2
     python scripts/speed_bench.py --one cube           # one run in this process's explore3d: a JSON line
 
-Each run is ``explore3d.run(load_object(NAME), "default", ExploreConfig(jobs=1))`` (one process:
+Each run is ``explore3d.run(load_object(NAME), "default", ExploreConfig(jobs=1, **CONFIG))`` (one process:
 the work is in the timed process) after the band is cached.  Prints one JSON line per run and a
 summary (medians; ratios against the first tree; time per wrap).
 """
@@ -17,12 +17,16 @@ import sys
 import time
 
 
-def one(name: str, seed: int) -> dict:
+def one(name: str, seed: int, config: dict) -> dict:
+    import dataclasses
+
     import explore3d
     from explore3d import ExploreConfig, load_object, run
 
+    fields = {f.name for f in dataclasses.fields(ExploreConfig)}  # older trees lack newer keys (probes)
+    cfg = ExploreConfig(jobs=1, **{k: v for k, v in config.items() if k in fields})
     t = time.perf_counter()
-    res = run(load_object(name), "default", ExploreConfig(jobs=1), seed=seed)
+    res = run(load_object(name), "default", cfg, seed=seed)
     ex = res.exploration
     return {"object": name, "file": explore3d.__file__, "wall_s": round(ex.wall_s, 3),
             "run_s": round(time.perf_counter() - t, 3), "steps": int(ex.steps), "n_wraps": int(ex.n_wraps),
@@ -39,9 +43,11 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", help="append the JSON lines to this file")
+    ap.add_argument("--config", default="{}", help='ExploreConfig keywords as JSON, e.g. \'{"directions": 12, "probes": null}\' '
+                    "(keys a tree does not know are left out)")
     a = ap.parse_args(argv)
     if a.one:
-        print(json.dumps(one(a.one, a.seed)), flush=True)
+        print(json.dumps(one(a.one, a.seed, json.loads(a.config))), flush=True)
         return
     rows = []
     for rep in range(a.repeats):
@@ -49,7 +55,8 @@ def main(argv=None):
             order = a.trees if rep % 2 == 0 else a.trees[::-1]  # alternate who goes first
             for tree in order:
                 env = dict(os.environ, PYTHONPATH=tree)
-                out = subprocess.run([sys.executable, os.path.abspath(__file__), "--one", obj, "--seed", str(a.seed)],
+                out = subprocess.run([sys.executable, os.path.abspath(__file__), "--one", obj, "--seed", str(a.seed),
+                                      "--config", a.config],
                                      env=env, capture_output=True, text=True, cwd=tree)
                 line = [l for l in out.stdout.splitlines() if l.startswith("{")]
                 if out.returncode or not line:
