@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from .defaults import DEFAULT_A
-from .estimators import ESTIMATORS as ESTIMATOR_NAMES
+from .defaults import ESTIMATOR_NAMES
 
 PROG = "explore3d"
 MESH_FORMATS = ("obj", "stl", "ply", "off", "glb")  # = explore3d.export.MESH_FORMATS (not imported: heavy)

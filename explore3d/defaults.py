@@ -9,3 +9,7 @@ DEFAULT_A = 0.05
 #: The paper's ``a`` (section IV), used only by its replica (:mod:`explore3d.table1`,
 #: :func:`explore3d.simulated.simulated_case`).
 PAPER_A = 0.2
+
+#: The reconstruction estimators' names (:data:`explore3d.estimators.ESTIMATORS`; ``explore3d
+#: reconstruct --estimator``), the paper's inverse hull first.
+ESTIMATOR_NAMES = ("inverse-hull", "convex-carved", "multi-centre", "implicit")

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .defaults import DEFAULT_A
+from .defaults import DEFAULT_A, ESTIMATOR_NAMES
 
 __all__ = ["ESTIMATORS", "estimate", "single_centre", "convex_carved", "multi_centre", "implicit_surface", "interior_centres"]
 
@@ -158,8 +158,9 @@ def implicit_surface(points, normals, wrap, centre, radius: float, swept=(), a: 
     return mesh
 
 
-#: the estimators' names (``explore3d reconstruct --estimator``), the paper's first
-ESTIMATORS = ("inverse-hull", "convex-carved", "multi-centre", "implicit")
+#: the estimators' names (``explore3d reconstruct --estimator``), the paper's first (defined in the
+#: light :mod:`explore3d.defaults`, which ``explore3d --help`` imports without numpy)
+ESTIMATORS = ESTIMATOR_NAMES
 
 
 def estimate(name: str, points, wrap, centre, radius: float, swept=(), a: float = DEFAULT_A, normals=None):

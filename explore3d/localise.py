@@ -205,15 +205,51 @@ def torques_of_contacts(spec: ArmSpec, q, contacts) -> np.ndarray:
 MAX_FORCE_N = 100.0
 
 
+try:  # the routine behind scipy.optimize.nnls without its input checks (the fits here are tiny:
+    # measured, the checks took 8 of every 9 us of a call; a localisation makes thousands of calls)
+    from scipy.optimize._slsqplib import nnls as _nnls_raw
+except ImportError:  # another scipy: the public function
+    _nnls_raw = None
+
+
+def _nnls(A: np.ndarray, b: np.ndarray, maxiter: int):
+    """``scipy.optimize.nnls(A, b, maxiter=maxiter)`` for a C-contiguous float64 (m, k) ``A`` and (m,)
+    ``b`` (the same numbers: the same routine)."""
+    if _nnls_raw is None:
+        return nnls(A, b, maxiter=maxiter)
+    x, rnorm, info = _nnls_raw(A, b, maxiter)
+    if info == 3:
+        raise RuntimeError("Maximum number of iterations reached.")
+    return x, rnorm
+
+
+_RIDGE_ROWS: dict = {}
+
+
+def _ridge_rows(ridge: float, k: int) -> np.ndarray:
+    """(k, k) ``sqrt(ridge) * I``, kept (read only) per (ridge, k): a localisation fits thousands of times."""
+    key = (ridge, k)
+    if key not in _RIDGE_ROWS:
+        rows = np.sqrt(ridge) * np.eye(k)
+        rows.flags.writeable = False
+        _RIDGE_ROWS[key] = rows
+    return _RIDGE_ROWS[key]
+
+
 def _fit_module(cols: list, tau: np.ndarray, fmax: float = MAX_FORCE_N, ridge: float = 0.0):
     if not cols:
         return np.zeros(0), float(tau @ tau)
-    A = np.concatenate(cols, axis=1)
+    k = sum(c.shape[1] for c in cols)
     if ridge > 0:  # a small penalty on the forces: among explanations the data cannot tell apart
         # (e.g. a straight proximal chain does not see the force along itself) the gentlest wins
-        A = np.vstack([A, np.sqrt(ridge) * np.eye(A.shape[1])])
-        tau = np.concatenate([tau, np.zeros(A.shape[1])])
-    x, rnorm = nnls(A, tau, maxiter=50 * A.shape[1])
+        n = len(tau)
+        A = np.empty((n + k, k))
+        np.concatenate(cols, axis=1, out=A[:n])
+        A[n:] = _ridge_rows(ridge, k)
+        tau = np.concatenate([tau, np.zeros(k)])
+    else:
+        A = np.concatenate(cols, axis=1)
+    x, rnorm = _nnls(A, np.asarray(tau, dtype=np.float64), 50 * k)
     if x.size and x.max() > fmax:
         return x, float("inf")
     return x, float(rnorm * rnorm)
@@ -369,11 +405,12 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
         origins = Tl[: link + 1, :2, 3]
         best = _fit(base + [col(chosen[m])], tau)[1]
         ok = [x_est]
-        for x in prof_x:
-            P = R @ np.array([x, spec.link_width / 2]) + o
-            c1 = np.zeros((n, 1))
-            r = P[None, :] - origins
-            c1[: link + 1, 0] = r[:, 0] * F[1] - r[:, 1] * F[0]
+        # the inner face's point at every x at once: (len(prof_x), n) joint torques of a unit force
+        P = (R @ np.stack([prof_x, np.full(len(prof_x), spec.link_width / 2)])).T + o
+        r = P[:, None, :] - origins[None, :, :]
+        C = np.zeros((len(prof_x), n, 1))
+        C[:, : link + 1, 0] = r[..., 0] * F[1] - r[..., 1] * F[0]
+        for x, c1 in zip(prof_x, C):
             cols = [c1]
             if x == 0.0:
                 cols = [col((link, "corner_pi"))]

@@ -211,8 +211,11 @@ class ArmSimulation:
         # the same generalised forces, exactly.  Cleared by PyBullet after every step.
         net = tau_ff.copy()
         net[:-1] -= tau_ff[1:]
-        for j in np.flatnonzero(net):
-            self._external_torque(self.arm, int(j), (net[j] * self._axis).tolist(), self._world_frame)
+        ax, ay, az = self._axis.tolist()
+        arm, frame, torque = self.arm, self._world_frame, self._external_torque
+        for j, t in enumerate(net.tolist()):  # Python floats: the same products as numpy's, less overhead
+            if t != 0.0:
+                torque(arm, j, (t * ax, t * ay, t * az), frame)
 
     def _step(self, command: JointCommand) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Send ``command``, advance one timestep; return the exact joint angles (n,), rad, velocities
@@ -227,12 +230,8 @@ class ArmSimulation:
             self._apply_feed_forward(tau_ff)
         self._step_sim()
         self.steps += 1
-        st = self._joint_states(self.arm, self.joints)
-        n = len(self.joints)
-        q = np.fromiter((x[0] for x in st), float, n)
-        dq = np.fromiter((x[1] for x in st), float, n)
-        tau = np.fromiter((x[3] for x in st), float, n) + tau_ff
-        return q, dq, tau
+        q, dq, _, tau = zip(*self._joint_states(self.arm, self.joints))
+        return np.array(q, dtype=np.float64), np.array(dq, dtype=np.float64), np.array(tau, dtype=np.float64) + tau_ff
 
     # --- evaluation only (oracle); never handed to the exploration ---------------------------------
     @property
