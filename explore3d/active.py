@@ -187,7 +187,7 @@ def finger_poses(targets, normals, estimate, centre, radius: float, spec, gap_m:
     out = []
     for ti, (p, n) in enumerate(zip(np.asarray(targets, float), np.asarray(normals, float))):
         n = n / np.linalg.norm(n)
-        tip = p + (spec.link_width / 2 + gap_m) * n
+        tip = p + half_w * n  # half a link width plus the gap off the surface
         tilt = np.abs(E @ n)
         best = None
         for i in np.nonzero(tilt <= math.sin(max_tilt))[0]:

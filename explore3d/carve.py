@@ -59,6 +59,13 @@ def _grid(bounds: np.ndarray, voxel_m: float):
     return origin, n, axes
 
 
+def _grid_points(bounds: np.ndarray, voxel_m: float):
+    """:func:`_grid`'s origin (3,) and shape (3,) with its voxel centres as (m, 3) points, C order."""
+    origin, n, axes = _grid(bounds, voxel_m)
+    X, Y, Z = np.meshgrid(*axes, indexing="ij")
+    return origin, n, np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+
+
 def carve(mesh, areas, voxel_m: float = DEFAULT_VOXEL_M, opening_voxels: int = DEFAULT_OPENING_VOXELS) -> CarveResult:
     """Cut the swept free space (``areas``: :class:`~explore3d.freespace.SweptArea` list) out of
     the closed estimate ``mesh`` (trimesh, metres); see the module docstring."""
@@ -69,9 +76,7 @@ def carve(mesh, areas, voxel_m: float = DEFAULT_VOXEL_M, opening_voxels: int = D
         raise ValueError(f"voxel_m must be > 0; got {voxel_m}")
     if not isinstance(opening_voxels, int) or opening_voxels < 0:
         raise ValueError(f"opening_voxels must be an integer >= 0; got {opening_voxels!r}")
-    origin, n, axes = _grid(np.asarray(mesh.bounds, dtype=float), voxel_m)
-    X, Y, Z = np.meshgrid(*axes, indexing="ij")
-    centres = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+    origin, n, centres = _grid_points(np.asarray(mesh.bounds, dtype=float), voxel_m)
     inside = _contains(mesh, centres)
     free = np.zeros(len(centres), dtype=bool)
     free[inside] = is_free(areas, centres[inside])

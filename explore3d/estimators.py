@@ -54,13 +54,11 @@ def convex_carved(points, centre, radius: float, swept=()):
 
 
 def _voxels(mesh, voxel_m: float):
-    """Inside mask (nx, ny, nz) of ``mesh`` on the carving lattice, its origin (3,) and axes."""
-    from .carve import _contains, _grid
+    """Inside mask (nx, ny, nz) of ``mesh`` on the carving lattice, and the lattice's origin (3,)."""
+    from .carve import _contains, _grid_points
 
-    origin, n, axes = _grid(np.asarray(mesh.bounds, dtype=float), voxel_m)
-    X, Y, Z = np.meshgrid(*axes, indexing="ij")
-    inside = _contains(mesh, np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])).reshape(n)
-    return inside, origin
+    origin, n, centres = _grid_points(np.asarray(mesh.bounds, dtype=float), voxel_m)
+    return _contains(mesh, centres).reshape(n), origin
 
 
 def interior_centres(mesh, n: int = 6, voxel_m: float = 2.0e-3, min_depth_fraction: float = 0.4) -> np.ndarray:
@@ -115,7 +113,7 @@ def implicit_surface(points, normals, wrap, centre, radius: float, swept=(), a: 
     from scipy.spatial import cKDTree
     from skimage.measure import marching_cubes
 
-    from .carve import _contains, _grid
+    from .carve import _contains, _grid_points
     from .freespace import is_free
     from .pipeline import within_bound
 
@@ -126,9 +124,7 @@ def implicit_surface(points, normals, wrap, centre, radius: float, swept=(), a: 
     base = single_centre(points, wrap, centre, radius, swept, a=a)
     lo = np.minimum(P.min(axis=0), base.bounds[0]) - 3 * voxel_m
     hi = np.maximum(P.max(axis=0), base.bounds[1]) + 3 * voxel_m
-    origin, n, axes = _grid(np.array([lo, hi]), voxel_m)
-    X, Y, Z = np.meshgrid(*axes, indexing="ij")
-    G = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+    origin, n, G = _grid_points(np.array([lo, hi]), voxel_m)
     dist, nn = cKDTree(P).query(G, k=min(k, len(P)))
     dist, nn = dist.reshape(len(G), -1), nn.reshape(len(G), -1)
     w = 1.0 / np.maximum(dist, voxel_m) ** 2

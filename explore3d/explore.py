@@ -355,16 +355,14 @@ class _WrapRunner:
 def current_estimate(spec, config, centre, radius, poses, results):
     """The estimate from the wraps run so far: the inverse hull of the hulled contacts carved by
     the swept free space (:func:`explore3d.carve.carve`), and the hulled contact points (m, 3)."""
-    from .carve import carve
     from .defaults import DEFAULT_A
-    from .pipeline import reconstruct_points
+    from .estimators import single_centre
 
     contacts = contacts_for_hull(ContactSet.concatenate(r[3] for r in results), config, centre, radius,
                                  plane=wrap_planes(poses))
     used = contacts.select(contacts.used)
-    hull = reconstruct_points(used.points, used.wrap, centre, radius, a=DEFAULT_A)
     swept = [a for r in results for a in r[4]]
-    return carve(hull.mesh, swept).mesh, used.points
+    return single_centre(used.points, used.wrap, centre, radius, swept, a=DEFAULT_A), used.points
 
 
 def _probe_rounds(spec, config, centre, radius, poses, results, run_poses) -> list[dict]:
