@@ -326,8 +326,15 @@ def band_cache_key(spec: ArmSpec, control: ControlConfig, sim: SimConfig, sensor
     """The hash naming a setting's cached band (everything the calibration depends on)."""
     from . import __version__
 
+    sim_d = dataclasses.asdict(sim)
+    if not sim.mass_error:  # an exact model: the key of the settings before the mass error existed
+        sim_d.pop("mass_error")
+        sim_d.pop("mass_seed")
+    ctl_d = dataclasses.asdict(control)
+    if not control.rereference_distal:  # likewise
+        ctl_d.pop("rereference_distal")
     blob = json.dumps({"protocol": BAND_PROTOCOL_VERSION, "version": __version__, "spec": dataclasses.asdict(spec),
-                       "control": dataclasses.asdict(control), "sim": dataclasses.asdict(sim),
+                       "control": ctl_d, "sim": sim_d,
                        "sensors": dataclasses.asdict(sensors), "planar": bool(planar)}, sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 

@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from .defaults import DEFAULT_A
-from .defaults import ESTIMATOR_NAMES
+from .defaults import ESTIMATOR_NAMES, SCENE_NAMES
 
 PROG = "explore3d"
 MESH_FORMATS = ("obj", "stl", "ply", "off", "glb")  # = explore3d.export.MESH_FORMATS (not imported: heavy)
@@ -184,6 +184,8 @@ RUN_OPTIONS = {
     "fingers": _int_min("--fingers", 0),
     # how each attempt encircles: the paper's straight sweep or its proposed curl-back
     "encircle": _choice("encircle", ("straight", "curl-back")),
+    # the world: the paper's idealised one, or the object resting on a table (explore3d.scene)
+    "scene": _choice("scene", SCENE_NAMES),
     # outputs
     "density": _positive("--density"),
     "height": _positive("--height"),
@@ -290,6 +292,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--fingers", type=RUN_OPTIONS["fingers"], metavar="N",
                    help="3d: finger probes per round of probes: the straight arm laid alongside unsupported "
                         "surface through space the estimate leaves empty, then swept onto it (default 12; 0: none)")
+    r.add_argument("--scene", type=RUN_OPTIONS["scene"],
+                   help="ideal (default: the object fixed, floating, frictionless, exact model, world reset per wrap) "
+                        "or table (resting on a table with weight and friction 0.5, 5%% model mass error, one "
+                        "persistent world, horizontal and table-clearing wraps, gentle sweeps)")
     r.add_argument("--encircle", type=RUN_OPTIONS["encircle"],
                    help="straight (default: every joint sweeps the straight chain beyond it, the paper's method) "
                         "or curl-back (after the first contact the chain beyond a few straight links curls away "
@@ -494,6 +500,10 @@ def explore_config(opts: dict):
             from .encircle import CurlBack
 
             kw["curl_back"] = CurlBack()
+        if opts.get("scene", "ideal") != "ideal":
+            from .scene import scene_explore_config
+
+            return scene_explore_config(opts["scene"], **kw)
         return ExploreConfig(**kw)
     except (TypeError, ValueError) as exc:
         raise UsageError(str(exc)) from None

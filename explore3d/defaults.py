@@ -13,3 +13,7 @@ PAPER_A = 0.2
 #: The reconstruction estimators' names (:data:`explore3d.estimators.ESTIMATORS`; ``explore3d
 #: reconstruct --estimator``), the paper's inverse hull first.
 ESTIMATOR_NAMES = ("inverse-hull", "convex-carved", "multi-centre", "implicit")
+
+#: The named scenes of ``explore3d run --scene`` (:meth:`explore3d.scene.SceneConfig.named`): the
+#: paper's idealised world (the default) and the object resting on a table.
+SCENE_NAMES = ("ideal", "table")

@@ -144,3 +144,47 @@ def spatial_wrap_poses(centre, radius: float, arm_width: float, n_normals: int =
                 out.append(wrap_pose(centre, R, float(s), r, arm_width, clearance, ld, n, angle,
                                      f"n{i} s{s * 1000:+.0f}mm a{math.degrees(angle):.0f}deg"))
     return out
+
+
+def table_wrap_poses(centre, radius: float, arm_width: float, table_z: float, lowest_m: float,
+                     n_heights: int = 5, n_angles: int = 8, n_normals: int = 48, n_tilted_angles: int = 2,
+                     clearance: float = 0.01, lead: float | None = None) -> list[WrapPose]:
+    """Base poses for an object resting on a table whose top is at world z ``table_z`` (m).
+
+    Horizontal wraps (the paper's setting) at ``n_heights`` heights from ``table_z + lowest_m`` (the
+    lowest plane the arm and its base block fit above the table) up to the rough centre's height
+    plus 0.7 ``radius``, each approached from ``n_angles`` directions about the vertical, the
+    curl turning alternately anticlockwise and clockwise (plane normal +z, -z); then the tilted
+    wraps of :func:`spatial_wrap_poses` (``n_normals`` x ``n_tilted_angles``, planes through the
+    rough centre) whose normal is more than 10 degrees from the vertical.  The caller keeps those
+    whose start clears the table (:func:`explore3d.workspace.pose_clears`) and stops each sweep at
+    the floor (:func:`explore3d.workspace.floor_stop`).
+
+    Args:
+        centre: (3,) the rough centre, world frame, m; radius: the rough bounding radius, m.
+        lowest_m: height of the lowest horizontal plane above the table, m.
+    """
+    centre = check_vector(centre, "centre", 3)
+    R_b = check_positive(radius, "radius")
+    z_lo = float(table_z) + float(lowest_m)
+    z_hi = float(centre[2]) + 0.7 * R_b
+    if z_hi < z_lo:
+        z_hi = z_lo
+    heights = np.linspace(z_lo, z_hi, n_heights) if n_heights > 1 else np.array([z_lo])
+    out = []
+    for h_i, z in enumerate(heights):
+        s = float(z - centre[2])
+        r = math.sqrt(max(R_b * R_b - s * s, (0.2 * R_b) ** 2))
+        for a_i in range(n_angles):
+            up = (a_i + h_i) % 2 == 0
+            n = np.array([0.0, 0.0, 1.0 if up else -1.0])
+            angle = 2 * math.pi * (a_i + 0.5 * (h_i % 2)) / n_angles
+            R = frame_from_normal(n) @ _rot_z(angle)
+            ld = r if lead is None else lead
+            out.append(wrap_pose(centre, R, s if up else -s, r, arm_width, clearance, ld, n, angle,
+                                 f"table z{(z - table_z) * 1000:+.0f}mm a{math.degrees(angle):.0f}deg"
+                                 f"{'' if up else ' cw'}"))
+    for p in spatial_wrap_poses(centre, R_b, arm_width, n_normals, 1, n_tilted_angles, clearance=clearance, lead=lead):
+        if abs(p.normal[2]) < math.cos(math.radians(10.0)):
+            out.append(p)
+    return out

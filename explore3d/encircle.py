@@ -31,6 +31,7 @@ from .detect import ContactBand, SweepDetector
 from .kinematics import gravity_torques, link_frames_planar
 from .robot import JointCommand, JointReading, Robot
 from .selfcontact import SELF_CONTACT_TOLERANCE_M, self_contact_pairs, self_distances
+from .workspace import floor_stop
 
 
 #: A detection is a self-contact when any of the sweep's last this many readings put a carried body
@@ -139,6 +140,10 @@ class ControlConfig:
             "Self-collision"): the back-off's later sweeps, the distal chain bent out of the
             straight shape the bands were measured with, gave 9 false detections in 79 (4 wraps,
             3D; 4 in 74 ending) and the default 3D run's volume error 2.75% (2.25% ending).
+        rereference_distal: after each detection the joints beyond the swept one are also held
+            at their measured angles (off: they stay referenced straight with the full torque, and
+            a distal link bent by the touch is pushed back into the object; measured on the cube
+            resting on a table, that settle shoved it 7 mm).
     """
 
     speed: float = 3.0
@@ -161,6 +166,18 @@ class ControlConfig:
     max_sweep_steps: int = 2000
     self_contact_tolerance: float = SELF_CONTACT_TOLERANCE_M
     self_contact_action: str = "end"
+    rereference_distal: bool = False
+
+    @classmethod
+    def gentle(cls) -> "ControlConfig":
+        """Sweeps for an object that can move (:class:`explore3d.scene.SceneConfig` ``resting``):
+        the tip at most 0.06 m/s (5x slower: an impact's momentum 5x smaller, the slide it causes
+        25x shorter), the speed ramped over 0.2 s, the swept joint's torque 1.5 x what that motion
+        needs plus 2 mN m (force at a contact ``d`` metres from the joint: that over ``d``), and
+        after a detection every joint beyond the swept one held where it is
+        (``rereference_distal``)."""
+        return cls(tip_speed=0.06, ramp_time=0.2, sweep_torque_margin=0.002, max_sweep_steps=8000,
+                   rereference_distal=True)
 
     def __post_init__(self):
         check_field(self, "speed", 0, "rad/s", strict=True)
@@ -180,7 +197,8 @@ class ControlConfig:
         check_field(self, "self_contact_tolerance", 0, "m")
         if self.self_contact_action not in ("retreat", "end"):
             raise ValueError(f"ControlConfig.self_contact_action must be 'retreat' or 'end'; got {self.self_contact_action!r}")
-        for name in ("watch_held", "gravity_compensation", "rereference_held", "press_while_settling"):
+        for name in ("watch_held", "gravity_compensation", "rereference_held", "press_while_settling",
+                     "rereference_distal"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"ControlConfig.{name} must be True or False; got {getattr(self, name)!r}")
 
@@ -493,7 +511,7 @@ def retreat(ctl: Controller, k: int, q_ref: np.ndarray, speeds: np.ndarray, clea
 
 def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: ControlConfig = ControlConfig(),
                 base_stop: float | None = None, record: bool = False, observer=None,
-                curl: CurlBack | None = None) -> Attempt:
+                curl: CurlBack | None = None, floor_z: float | None = None) -> Attempt:
     """One attempt from the base pose ``T_world_base`` (4, 4).
 
     Args:
@@ -505,6 +523,9 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
             see :func:`sweep_joint`).
         curl: the curl-back encirclement (:class:`CurlBack`); None: the straight sweep, every
             joint sweeps with the chain beyond it straight.
+        floor_z: a table's known height plus a clearance, world z, m: each joint's sweep stops
+            before the chain it carries would dip below it (:func:`explore3d.workspace.floor_stop`,
+            on the model at the references; the sweep then ends as at its limit).  None: no floor.
     """
     spec: ArmSpec = robot.spec
     n = spec.n_links
@@ -535,6 +556,8 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
                 q_ref[:] = target
         base = k == 0 and base_stop is not None
         stop = min(upper, base_stop) if base else upper
+        if floor_z is not None:
+            stop = floor_stop(spec, q_ref, k, ctl.T, floor_z, stop)
         reason = sweep_joint(ctl, k, q_ref, stop, band, speeds[k], sweep_torques[k], base, observer)
         q = ctl.reading.q
         if reason is StopReason.CONTACT and any(self_contact_pairs(spec, qs, cfg.self_contact_tolerance, moving_from=k)
@@ -555,6 +578,8 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
             contact_step[k] = ctl.steps
             if cfg.rereference_held:
                 q_ref[:k] = q[:k] + cfg.hold_bias * contact[:k]
+            if cfg.rereference_distal:  # the carried chain, bent by the touch, does not push back
+                q_ref[k + 1:] = q[k + 1:]
             still = False
             if cfg.press_while_settling:  # keep the sweep's reference and torque limit: a gentle push
                 limits = ctl.full.copy()
@@ -582,14 +607,16 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
 
 
 def run_wrap(robot: Robot, T_world_base, band: ContactBand, attempts: int = 4, base_step: float = 0.1,
-             cfg: ControlConfig = ControlConfig(), record: bool = False, curl: CurlBack | None = None) -> list[Attempt]:
+             cfg: ControlConfig = ControlConfig(), record: bool = False, curl: CurlBack | None = None,
+             floor_z: float | None = None) -> list[Attempt]:
     """``attempts`` attempts from one base pose: the first sweeps the base joint until contact;
     each later one stops the base joint ``base_step`` rad short of the previous stop angle.
-    ``curl``: the curl-back encirclement (:class:`CurlBack`), None: the straight sweep."""
+    ``curl``: the curl-back encirclement (:class:`CurlBack`), None: the straight sweep; ``floor_z``:
+    see :func:`run_attempt`."""
     out = []
     stop = None
     for m in range(attempts):
-        att = run_attempt(robot, T_world_base, band, cfg, base_stop=stop, record=record, curl=curl)
+        att = run_attempt(robot, T_world_base, band, cfg, base_stop=stop, record=record, curl=curl, floor_z=floor_z)
         out.append(att)
         prev = att.q[0] if stop is None else stop
         stop = prev - base_step

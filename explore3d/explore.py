@@ -7,6 +7,7 @@ identical results for any number of jobs.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import time
@@ -18,7 +19,7 @@ import numpy as np
 from ._validate import check_field
 from .active import ProbeConfig
 from .arm import ArmSpec, load_arm
-from .directions import WrapPose, planar_wrap_poses, spatial_wrap_poses
+from .directions import WrapPose, planar_wrap_poses, spatial_wrap_poses, table_wrap_poses
 from .band import cached_band
 from .contacts import ContactSet, contacts_for_hull, localise_attempts
 from .detect import ContactBand
@@ -26,6 +27,8 @@ from .encircle import Attempt, ControlConfig, CurlBack, run_wrap
 from .kinematics import link_surface_points
 from .freespace import swept_area
 from .robot import ForwardingRobot, RecordingRobot
+from .workspace import pose_clears
+from .scene import SceneConfig
 from .sensing import SensorConfig
 from .sim import ArmSimulation, SimConfig
 
@@ -83,6 +86,16 @@ class ExploreConfig:
             (:class:`~explore3d.active.ProbeConfig`; 3d only, needs ``free_space``); None: none.
             Measured on the default run (BENCHMARKS.md, "Free space, carving and probes"): the
             L-block from 18.8% (no carving, no probes) to 10.5% with 150 wraps in place of 96.
+        scene: the world the object sits in (:class:`~explore3d.scene.SceneConfig`; default the
+            paper's idealised one: floating, fixed, frictionless, exact model, reset every wrap).
+            With a table (``scene.table``, 3d only) the wraps are :func:`table_wrap_poses`,
+            every sweep stops above the table (:func:`explore3d.workspace.floor_stop`), contacts
+            located at the table are dropped and the estimate is cut at the table's plane; a
+            persistent world (``scene.persistent``) runs the wraps in sequence in one world
+            (``jobs`` then does not apply) and flags wraps after which the object seems to have
+            moved (:mod:`explore3d.motion`).
+        table_heights, table_angles: the table scene's horizontal wraps: heights and approach
+            directions per height (:func:`~explore3d.directions.table_wrap_poses`).
         curl_back: every wrap's attempts use the curl-back encirclement
             (:class:`~explore3d.encircle.CurlBack`: after the first contact the chain beyond the
             swept joint's few straight links curls away from the object and unravels as contacts
@@ -110,6 +123,9 @@ class ExploreConfig:
     free_space: bool = True
     probes: ProbeConfig | None = field(default_factory=ProbeConfig)
     curl_back: CurlBack | None = None
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    table_heights: int = 5
+    table_angles: int = 8
 
     def __post_init__(self):
         if self.mode not in ("planar", "3d"):
@@ -121,7 +137,16 @@ class ExploreConfig:
             object.__setattr__(self, "directions", 3 if self.mode == "planar" else 48)
         if self.attempts is None:
             object.__setattr__(self, "attempts", 4 if self.mode == "planar" else 1)
-        for name in ("directions", "offsets", "angles", "attempts", "n_along", "n_height"):
+        if not isinstance(self.scene, SceneConfig):
+            raise ValueError(f"ExploreConfig.scene must be a SceneConfig; got {type(self.scene).__name__}")
+        if self.scene.table and self.mode != "3d":
+            raise ValueError("a table scene needs mode='3d' (the planar arm lies in one horizontal plane through "
+                             "the centre): drop the table (--scene ideal) or use mode '3d'")
+        if self.scene.table and self.curl_back is not None:
+            raise ValueError("the curl-back's hairpin moves are not checked against the table: use the straight "
+                             "sweep (curl_back=None) in a table scene")
+        for name in ("directions", "offsets", "angles", "attempts", "n_along", "n_height", "table_heights",
+                     "table_angles"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
@@ -154,6 +179,10 @@ class ExploreConfig:
         d["faces"] = list(self.faces)
         return d
 
+    def floor_z(self, spec: ArmSpec, table_z: float | None) -> float | None:
+        """The plane, world z, m, the arm's plan stays above: the table plus the scene's clearance."""
+        return None if table_z is None or not self.scene.table else float(table_z) + self.scene.table_clearance
+
 
 @dataclass(frozen=True)
 class Exploration:
@@ -184,6 +213,12 @@ class Exploration:
         probe_rounds: one dict per round of probes (``config.probes``): its ``targets`` (t, 3) m,
             their ``distance_m`` to the nearest contact before the round, ``wraps`` added, the
             estimate's ``volume_m3`` before the round and ``wall_s``.
+        table_z: the table top's height the robot was told, world z, m (None: no table).
+        moved: (n_wraps,) bool: after the wrap the object seemed to have moved, by the robot's own
+            contacts and swept space (:func:`explore3d.motion.moved_after`; persistent worlds only,
+            else all False).
+        redone: (n_wraps,) bool: the wrap repeats the one before it, with lighter sweeps, because
+            that one was flagged in ``moved``.
     """
 
     spec: ArmSpec
@@ -203,6 +238,9 @@ class Exploration:
     contacts: ContactSet | None = None
     swept: tuple = ()
     probe_rounds: tuple = ()
+    table_z: float | None = None
+    moved: np.ndarray | None = None
+    redone: np.ndarray | None = None
 
     @property
     def n_wraps(self) -> int:
@@ -222,8 +260,18 @@ def rough_bound(vertices) -> tuple[np.ndarray, float]:
     return c, 1.05 * float(np.linalg.norm(v - c, axis=1).max())
 
 
-def wrap_poses(spec: ArmSpec, config: ExploreConfig, centre, radius: float) -> list[WrapPose]:
-    """The wraps' base poses for ``config`` around the rough centre (3,) and bounding radius (m)."""
+def wrap_poses(spec: ArmSpec, config: ExploreConfig, centre, radius: float, table_z: float | None = None) -> list[WrapPose]:
+    """The wraps' base poses for ``config`` around the rough centre (3,) and bounding radius (m);
+    with a table (``config.scene.table``, its top at world z ``table_z``, m) the table's poses
+    (:func:`~explore3d.directions.table_wrap_poses`) whose start clears it."""
+    if config.scene.table:
+        if table_z is None:
+            raise ValueError("a table scene's wraps need the table's height: pass table_z (world z of its top, m)")
+        floor = config.floor_z(spec, table_z)
+        lowest = spec.base_size / 2.0 + config.scene.table_clearance + 1.0e-3
+        poses = table_wrap_poses(centre, radius, spec.link_width, table_z, lowest, config.table_heights,
+                                 config.table_angles, config.directions, config.angles, clearance=config.clearance)
+        return [p for p in poses if pose_clears(spec, p.T_world_base, floor)]
     if config.mode == "planar":
         return planar_wrap_poses(centre, radius, spec.link_width, config.directions, config.mirrored,
                                  clearance=config.clearance)
@@ -248,8 +296,8 @@ def wrap_planes(poses) -> np.ndarray:
 _WORKER: dict = {}
 
 
-def _init_worker(spec, vertices, faces, sim_config):
-    _WORKER["world_args"] = (spec, vertices, faces, sim_config)
+def _init_worker(spec, vertices, faces, sim_config, setup=None):
+    _WORKER["world_args"] = (spec, vertices, faces, sim_config, setup)
 
 
 class AngleRecorder(ForwardingRobot):
@@ -272,17 +320,29 @@ def _run_one(args):
     than alone, so results depended on the number of jobs), and a new world costs 4-27 ms against
     about a second per wrap.  The controller gets the robot interface only; the sensor noise is
     seeded by the wrap's index."""
-    index, T, band, config, bound = args
-    spec = _WORKER["world_args"][0]
+    hook = _WORKER.get("after_wrap")  # the evaluation's hook, in-process runs only
     with ArmSimulation(*_WORKER["world_args"]) as world:
-        robot = world.robot(config.sensors)
-        robot.reseed((0, index))
-        rec = RecordingRobot(robot) if config.record else robot
-        angles = AngleRecorder(rec) if config.free_space else rec
-        atts = run_wrap(angles, T, band, attempts=config.attempts, base_step=config.base_step, cfg=config.control,
-                        record=config.record, curl=config.curl_back)
-        gravity = robot.gravity
-        steps, log = world.steps, (rec.log() if config.record else None)
+        if hook is not None:
+            hook(-1, world)
+        out = _wrap_in(world, args)
+        if hook is not None:
+            hook(args[0], world)
+        return out
+
+
+def _wrap_in(world: ArmSimulation, args):
+    """One wrap in ``world`` (the exploration sees its robot interface only)."""
+    index, T, band, config, bound, floor_z = args
+    spec = world.spec
+    steps0 = world.steps
+    robot = world.robot(config.sensors)
+    robot.reseed((0, index))
+    rec = RecordingRobot(robot) if config.record else robot
+    angles = AngleRecorder(rec) if config.free_space else rec
+    atts = run_wrap(angles, T, band, attempts=config.attempts, base_step=config.base_step, cfg=config.control,
+                    record=config.record, curl=config.curl_back, floor_z=floor_z)
+    gravity = robot.gravity
+    steps, log = world.steps - steps0, (rec.log() if config.record else None)
     # the contacts from the settled readings alone (the robot's own data, its model and gravity)
     contacts = localise_attempts(spec, atts, gravity, config.sensors, wrap=index)
     # the space the links swept through, from the measured angles, the model and the base pose
@@ -328,12 +388,14 @@ def contact_points(spec: ArmSpec, attempts, config: ExploreConfig):
 class _WrapRunner:
     """Runs wraps in this process (one job) or in a pool of worker processes kept for every round."""
 
-    def __init__(self, spec, vertices, faces, config, jobs: int):
-        self.args, self.jobs, self.pool = (spec, vertices, faces, config.sim), jobs, None
+    def __init__(self, spec, vertices, faces, config, jobs: int, setup=None, after_wrap=None):
+        self.args, self.jobs, self.pool = (spec, vertices, faces, config.sim, setup), jobs, None
+        self.after_wrap = after_wrap
 
     def __enter__(self):
         if self.jobs == 1:
             _init_worker(*self.args)
+            _WORKER["after_wrap"] = self.after_wrap
         else:
             import multiprocessing as mp
 
@@ -348,8 +410,34 @@ class _WrapRunner:
     def __exit__(self, *exc):
         if self.pool is None:
             _WORKER.pop("world_args", None)
+            _WORKER.pop("after_wrap", None)
         else:
             self.pool.shutdown()
+
+
+class _PersistentRunner:
+    """Runs wraps in sequence in one world that persists across them (the scene's
+    ``persistent``); ``after_wrap(index, world)`` (the evaluation's hook, may be None) is called
+    after each."""
+
+    def __init__(self, spec, config, setup, after_wrap=None):
+        self.spec, self.config, self.setup, self.after_wrap, self.world = spec, config, setup, after_wrap, None
+
+    def __enter__(self):
+        self.world = ArmSimulation(self.spec, config=self.config.sim, scene=self.setup)
+        if self.after_wrap is not None:
+            self.after_wrap(-1, self.world)
+        return self
+
+    def map(self, tasks):
+        for t in tasks:
+            r = _wrap_in(self.world, t)
+            if self.after_wrap is not None:
+                self.after_wrap(t[0], self.world)
+            yield r
+
+    def __exit__(self, *exc):
+        self.world.close()
 
 
 def current_estimate(spec, config, centre, radius, poses, results):
@@ -365,7 +453,7 @@ def current_estimate(spec, config, centre, radius, poses, results):
     return single_centre(used.points, used.wrap, centre, radius, swept, a=DEFAULT_A), used.points
 
 
-def _probe_rounds(spec, config, centre, radius, poses, results, run_poses) -> list[dict]:
+def _probe_rounds(spec, config, centre, radius, poses, results, run_poses, keep=None) -> list[dict]:
     """Rounds of probes (:mod:`explore3d.active`): wraps through the estimate's least supported
     surface until a round changes its volume by less than ``min_change`` or none is left."""
     from .active import finger_poses, probe_poses, unsupported_targets
@@ -395,6 +483,8 @@ def _probe_rounds(spec, config, centre, radius, poses, results, run_poses) -> li
             ft, fn, _ = unsupported_targets(est, pts, d_min, excl, pc.fingers, previous_fingers, pc.samples, seed=k)
             new += finger_poses(ft, fn, est, centre, radius, spec, label=f"finger r{k}")
             previous_fingers = np.vstack([previous_fingers, ft])
+        if keep is not None:  # a table: only the probes whose start clears it
+            new = [p for p in new if keep(p.T_world_base)]
         poses.extend(new)
         run_poses(new)
         previous = np.vstack([previous, targets])
@@ -404,48 +494,91 @@ def _probe_rounds(spec, config, centre, radius, poses, results, run_poses) -> li
 
 
 def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre=None, radius=None,
-            progress=None) -> Exploration:
+            progress=None, *, setup=None, after_wrap=None) -> Exploration:
     """Explore ``mesh`` (a closed trimesh, metres, world frame) with ``arm`` (name, URDF path or
     ArmSpec) and return the gathered link surface points.
 
     Args:
         centre, radius: the rough location (3,) and bounding radius (m) the robot is told;
-            default: :func:`rough_bound` of the mesh (the mesh itself is never given to the robot).
+            default: :func:`rough_bound` of the object (the mesh itself is never given to the robot;
+            in a scene other than the ideal one, of the object as it rests).
         progress: None, or a callable ``progress(done, total)`` called after each wrap.
+        setup: the settled scene (:func:`explore3d.scene.settle_scene`) when ``config.scene`` is not
+            the ideal one; None: settled here.  The robot is told its table height only.
+        after_wrap: the evaluation's hook ``after_wrap(index, world)``, called with index -1 when a
+            world is ready and after each wrap with its index, with the
+            :class:`~explore3d.sim.ArmSimulation` it runs in (a persistent world, or one job; e.g.
+            :class:`explore3d.scene.SceneWatch`); never seen by the exploration.
     """
     t0 = time.perf_counter()
     spec = load_arm(arm)
-    c0, r0 = rough_bound(mesh.vertices)
+    if setup is None and not config.scene.ideal:
+        from .scene import settle_scene
+
+        setup = settle_scene(mesh, config.scene, spec, config.sim)
+    truth = mesh if setup is None else setup.truth
+    c0, r0 = rough_bound(truth.vertices)
     centre = c0 if centre is None else np.asarray(centre, float)
     radius = r0 if radius is None else float(radius)
-    poses = list(wrap_poses(spec, config, centre, radius))
+    table_z = None if setup is None else setup.table_z
+    floor_z = config.floor_z(spec, table_z)
+    poses = list(wrap_poses(spec, config, centre, radius, table_z))
     band = cached_band(spec, config.control, config.sim, config.sensors, config.mode == "planar")
     band_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     vertices = np.asarray(mesh.vertices, dtype=float)
     faces = np.asarray(mesh.faces, dtype=np.int64)
-    jobs = config.jobs or os.cpu_count() or 1
+    persistent = setup is not None and config.scene.persistent
+    jobs = 1 if persistent or after_wrap is not None else (config.jobs or os.cpu_count() or 1)
     results: list = []
     rounds: list[dict] = []
     probing = config.probes is not None and config.probes.rounds > 0 and config.mode == "3d"
     jobs = min(jobs, len(poses)) if not probing else jobs
-    with _WrapRunner(spec, vertices, faces, config, jobs) as runner:
+    moved: list[bool] = []
+    redone: list[bool] = []
+    runner = (_PersistentRunner(spec, config, setup, after_wrap) if persistent
+              else _WrapRunner(spec, vertices, faces, config, jobs, setup, after_wrap))
+    def task(i, p):
+        return (i, p.T_world_base, band, config, (centre, radius), floor_z)
+
+    with runner:
         def run_poses(new_poses):
-            first = len(results)
-            tasks = [(first + i, p.T_world_base, band, config, (centre, radius)) for i, p in enumerate(new_poses)]
-            for r in runner.map(tasks):
-                results.append(r)
-                if progress:
-                    progress(len(results), len(poses))
+            """Run ``new_poses`` (already the last entries of ``poses``); in a persistent world one
+            at a time, repeating once a wrap after which the object seems to have moved."""
+            if not persistent:
+                first = len(results)
+                for r in runner.map([task(first + j, p) for j, p in enumerate(new_poses)]):
+                    results.append(r)
+                    moved.append(False)
+                    redone.append(False)
+                    if progress:
+                        progress(len(results), len(poses))
+                return
+            for p in list(new_poses):
+                redo = False
+                while True:
+                    i = len(results)
+                    results.append(next(iter(runner.map([task(i, p)]))))
+                    moved.append(_moved(spec, results, config, centre, radius))
+                    redone.append(redo)
+                    if progress:
+                        progress(len(results), len(poses))
+                    if not moved[-1] or redo or not config.scene.redo_moved:
+                        break
+                    poses.insert(i + 1, p)  # the same wrap again, where the object is now
+                    redo = True
 
         run_poses(poses)
         if probing:
-            rounds = _probe_rounds(spec, config, centre, radius, poses, results, run_poses)
+            rounds = _probe_rounds(spec, config, centre, radius, poses, results, run_poses,
+                                   keep=None if floor_z is None else (lambda T: pose_clears(spec, T, floor_z)))
     attempts = tuple(tuple(r[0]) for r in results)
     steps = int(sum(r[1] for r in results))
     contacts = ContactSet.concatenate(r[3] for r in results)
     if config.points == "contacts":
         contacts = contacts_for_hull(contacts, config, centre, radius, plane=wrap_planes(poses))
+        if table_z is not None:  # located at the table (at most its clearance above it): the table's
+            contacts = dataclasses.replace(contacts, used=contacts.used & (contacts.points[:, 2] > floor_z))
         used = contacts.select(contacts.used)
         d = 2 if config.mode == "planar" else 3
         points, pw, pa, pl = used.points[:, :d], used.wrap, used.attempt, used.link
@@ -456,5 +589,17 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
         point_wrap=pw, point_attempt=pa, point_link=pl,
         band=band, steps=steps, sim_time_s=steps * config.sim.timestep, wall_s=time.perf_counter() - t0, band_s=band_s,
         logs=tuple(r[2] for r in results) if config.record else None, contacts=contacts,
-        swept=tuple(a for r in results for a in r[4]), probe_rounds=tuple(rounds),
+        swept=tuple(a for r in results for a in r[4]), probe_rounds=tuple(rounds), table_z=table_z,
+        moved=np.array(moved, dtype=bool), redone=np.array(redone, dtype=bool),
     )
+
+
+def _moved(spec, results, config, centre, radius) -> bool:
+    """Whether, after the last wrap in ``results``, the object seems to have moved
+    (:func:`explore3d.motion.moved_after` of the wraps' contact segments and swept space)."""
+    from .motion import DEFAULT_MIN_SEGMENTS, contact_segments, moved_after
+
+    if not config.free_space:
+        return False
+    segs = [contact_segments(spec, r[0], centre, radius) for r in results]
+    return moved_after(segs, [r[4] for r in results], len(results) - 1) >= DEFAULT_MIN_SEGMENTS

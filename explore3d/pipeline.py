@@ -46,11 +46,16 @@ class Result:
     radius: float = math.nan
     n_points_used: int = -1
     carved: object | None = None
+    cut: object | None = None
+    setup: object | None = None
 
     @property
     def estimate(self):
         """The reconstructed shape: shapely Polygon (planar) or closed trimesh (3D: the hull, carved
-        by the swept free space when there is some), world frame, metres."""
+        by the swept free space when there is some, cut at the table's plane on a table), world
+        frame, metres."""
+        if self.cut is not None:
+            return self.cut
         return self.hull.shape() if self.carved is None else self.carved.mesh
 
     def summary(self) -> dict:
@@ -81,6 +86,15 @@ def exploration_summary(ex: Exploration) -> dict:
     """``n_wraps``, ``n_points``, ``n_contacts``, ``wall_s``, ``sim_s`` and ``steps`` of an exploration."""
     return {"n_wraps": ex.n_wraps, "n_points": int(len(ex.points)), "n_contacts": ex.n_contacts,
             "wall_s": float(ex.wall_s), "sim_s": float(ex.sim_time_s), "steps": int(ex.steps)}
+
+
+def table_contacts(ex: Exploration) -> int:
+    """How many of the exploration's localised contacts lay at the table (at most the scene's
+    clearance above its known height) and were left out of the hull; 0 without a table."""
+    if ex.table_z is None or ex.contacts is None or not len(ex.contacts):
+        return 0
+    floor = ex.table_z + ex.config.scene.table_clearance
+    return int(((ex.contacts.points[:, 2] <= floor) & ~ex.contacts.self_contact).sum())
 
 
 def sensed_z_band(ex: Exploration) -> tuple[float, float]:
@@ -284,9 +298,17 @@ def reconstruct_exploration(ex: Exploration, centre, radius: float, a: float = D
                             outlier_ratio: float | None = OUTLIER_RATIO):
     """Inverse hull of an exploration's points about the rough ``centre`` (3,), dropping points
     farther than ``radius`` metres from it and points far inside what other wraps saw in the same
-    direction (:func:`reconstruct_points`).  Planar explorations use the x-y components."""
-    return reconstruct_points(ex.points, ex.point_wrap, centre, radius, a=a, method=method,
-                              outlier_ratio=outlier_ratio)
+    direction (:func:`reconstruct_points`).  Planar explorations use the x-y components.  On a
+    table (``ex.table_z``) the lowest layer of points (within a link height) is also put on the
+    table plane (:func:`explore3d.tabletop.support_points`)."""
+    points, wrap = ex.points, ex.point_wrap
+    if ex.table_z is not None and len(points):
+        from .tabletop import support_points
+
+        extra = support_points(points, ex.table_z, ex.spec.link_height)
+        points = np.vstack([points, extra])
+        wrap = np.r_[wrap, np.full(len(extra), -1)]
+    return reconstruct_points(points, wrap, centre, radius, a=a, method=method, outlier_ratio=outlier_ratio)
 
 
 def planar_truth(mesh, z: float):
@@ -327,7 +349,8 @@ def rough_bound_or(mesh, centre=None, radius=None) -> tuple[np.ndarray, float]:
 
 
 def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float = DEFAULT_A,
-        method: str = "exponential", progress=None, *, centre=None, radius=None, seed: int = 0) -> Result:
+        method: str = "exponential", progress=None, *, centre=None, radius=None, seed: int = 0,
+        setup=None, after_wrap=None) -> Result:
     """Explore ``mesh`` (closed trimesh, metres) with ``arm``, reconstruct, and score.
 
     Args:
@@ -341,6 +364,9 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
             bounding-box centre of ``mesh`` and 1.05 times its largest vertex distance from it
             (:func:`~explore3d.explore.rough_bound`).
         seed: seed of the surface samples of the Chamfer/Hausdorff measures (3D).
+        setup, after_wrap: the settled scene and the evaluation's per-wrap hook
+            (:func:`~explore3d.explore.explore`); a scene other than the ideal one is settled here
+            when ``setup`` is None, and the truth is the object as it rests.
 
     Raises:
         NoContactError: the arm touched nothing (the object is out of reach or too big).
@@ -348,8 +374,14 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
     """
     from .metrics import shape_error
 
-    centre, radius = rough_bound_or(mesh, centre, radius)
-    ex = explore(mesh, arm, config, centre=centre, radius=radius, progress=progress)
+    if setup is None and not config.scene.ideal:
+        from .scene import settle_scene
+
+        setup = settle_scene(mesh, config.scene, load_arm(arm), config.sim)
+    truth = mesh if setup is None else setup.truth  # the object as it rests
+    centre, radius = rough_bound_or(truth, centre, radius)
+    ex = explore(mesh, arm, config, centre=centre, radius=radius, progress=progress, setup=setup,
+                 after_wrap=after_wrap)
     if ex.n_contacts == 0:
         raise NoContactError(
             "the arm made no contact with the object: it is out of reach, too large for the arm, or the rough "
@@ -368,15 +400,21 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
             "explore from more directions or with more attempts (ExploreConfig directions/attempts, --directions/"
             "--attempts) so the arm surrounds the object, or correct the rough centre/radius", exploration=ex,
         ) from None
-    truth = planar_truth(mesh, float(centre[2])) if config.mode == "planar" else mesh
+    truth = planar_truth(mesh, float(centre[2])) if config.mode == "planar" else truth
     carved = None
     if config.mode == "3d" and config.free_space:
         from .carve import carve
 
         carved = carve(hull.mesh, ex.swept)
     est = hull.shape() if carved is None else carved.mesh
+    cut = None
+    if ex.table_z is not None:
+        from .tabletop import cut_at_table
+
+        cut = est = cut_at_table(est, ex.table_z)
     return Result(exploration=ex, hull=hull, truth=truth, error=shape_error(est, truth, seed=seed),
-                  centre=centre, radius=radius, n_points_used=len(hull.points), carved=carved)  # the hull's input
+                  centre=centre, radius=radius, n_points_used=len(hull.points), carved=carved, cut=cut,
+                  setup=setup)  # the hull's input
 
 
 # --- a complete run: what `explore3d run` does -------------------------------------------------------
@@ -473,12 +511,20 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
     if not isinstance(output, OutputConfig):
         raise ValueError(f"output must be an OutputConfig; got {type(output).__name__}")
     t_start = time.perf_counter()
+    timings = {}
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     spec = load_arm(arm)
     bound_given = centre is not None or radius is not None
-    centre, radius = rough_bound_or(mesh, centre, radius)
-    timings = {}
+    setup = watch = None
+    if not config.scene.ideal:  # the evaluation's setup: the object settled on its table
+        from .scene import SceneWatch, settle_scene
+
+        t0 = time.perf_counter()
+        setup = settle_scene(mesh, config.scene, spec, config.sim)
+        timings["settle_s"] = time.perf_counter() - t0
+        watch = SceneWatch(setup)
+    centre, radius = rough_bound_or(mesh if setup is None else setup.truth, centre, radius)
     report = {
         "object": object_name, "mode": config.mode, "arm": arm if isinstance(arm, str) else spec.name,
         "a": a, "method": method,
@@ -514,7 +560,7 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
     t0 = time.perf_counter()
     try:
         res = run(mesh, spec, config, a=a, method=method, progress=progress, centre=centre, radius=radius,
-                  seed=seed)
+                  seed=seed, setup=setup, after_wrap=None if watch is None else watch.after_wrap)
     except (NoContactError, ReconstructionError) as exc:
         ex = exc.exploration
         timings["run_s"] = time.perf_counter() - t0
@@ -534,6 +580,9 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
         summary.pop(k)
     report.update(summary)
     report["errors"] = res.error.to_dict()
+    if setup is not None:  # evaluation: the settled scene, the object's true drift, false detections
+        report["scene"] = {**setup.to_dict(), **watch.summary(res.exploration),
+                           "table_contacts_dropped": int(table_contacts(res.exploration))}
     report["contact_band"] = res.exploration.band.to_dict()  # per joint, rad, and how it was measured
     if config.mode == "planar":
         report["section_z_m"] = float(res.centre[2])  # the arm's plane passes through the rough centre

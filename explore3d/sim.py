@@ -41,8 +41,9 @@ class SimConfig:
             measured on the 80 mm cube, PyBullet's friction made held links stick-slip against the
             surface (contact forces jumping between 0 and ~15 N from step to step), which read as
             false contacts; with frictionless contact the wrap is clean.
-        collision_margin: PyBullet collision margin of the object and of every link, m
-            (``changeDynamics(collisionMargin=...)``); None keeps PyBullet's defaults, which
+        collision_margin: PyBullet collision margin of the object and of the base block, m
+            (``changeDynamics(collisionMargin=...)``; PyBullet leaves the links of a multibody at its
+            1 mm whatever is asked, measured with getDynamicsInfo); None keeps PyBullet's defaults, which
             leave touching faces about 1 mm outside a triangle mesh.  Default 0.3 mm: measured on
             every built-in object (BENCHMARKS.md, "Thin contact margin"), touching faces then
             sit about 0.2 mm out; 0.1 mm and thinner let links sink up to 2-3 mm into the
@@ -71,6 +72,12 @@ class SimConfig:
             calibration and the controller therefore judge a detection by the sweep's last
             readings, not its own (:data:`explore3d.encircle.SELF_CONTACT_WINDOW_STEPS`).  False: links pass through
             each other (the behaviour before self-collision existed).
+        mass_error: the simulated arm's link masses and inertias differ from its model (the
+            controller's) by a factor ``1 + e`` per link, ``e`` drawn uniformly from
+            ``[-mass_error, mass_error]`` with ``mass_seed`` (:func:`explore3d.scene.mass_scales`;
+            0: the model is exact).  The contact band is measured on this arm (as a robot measures
+            its own free motion), the gravity feed-forward and the localisation use the model.
+        mass_seed: seed of the mass error.
     """
 
     timestep: float = 1.0 / 240.0
@@ -81,6 +88,8 @@ class SimConfig:
     friction: float = 0.0
     collision_margin: float | None = 3.0e-4
     self_collision: bool = True
+    mass_error: float = 0.0
+    mass_seed: int = 0
 
     def __post_init__(self):
         if self.solver not in ("dantzig", "si"):
@@ -89,6 +98,8 @@ class SimConfig:
         check_field(self, "position_gain", 0, strict=True)
         check_field(self, "velocity_gain", 0)
         check_field(self, "friction", 0)
+        check_field(self, "mass_error", 0, hi=0.5)
+        check_field(self, "mass_seed", 0, integer=True)
         if not isinstance(self.self_collision, bool):
             raise ValueError(f"SimConfig.self_collision must be True or False; got {self.self_collision!r}")
         if self.collision_margin is not None:
@@ -119,11 +130,12 @@ class ArmSimulation:
         config: physics settings.
     """
 
-    def __init__(self, spec: ArmSpec, vertices=None, faces=None, config: SimConfig = SimConfig()):
+    def __init__(self, spec: ArmSpec, vertices=None, faces=None, config: SimConfig = SimConfig(), scene=None):
         from ._quiet import quiet_c_output
 
         self.spec = spec
         self.config = config
+        self.scene = scene
         with quiet_c_output():  # PyBullet's C-level banners: build time, argv[0]=, solver switch
             import pybullet
             from pybullet_utils import bullet_client
@@ -147,8 +159,21 @@ class ArmSimulation:
         # Switch off the default velocity motors so POSITION_CONTROL alone drives the joints.
         p.setJointMotorControlArray(self.arm, self.joints, pybullet.VELOCITY_CONTROL, forces=[0.0] * len(self.joints))
         self.object = None
+        self.table = None
         margin = {} if config.collision_margin is None else {"collisionMargin": float(config.collision_margin)}
-        if vertices is not None:
+        link_friction = config.friction
+        if scene is not None:
+            sc = scene.config
+            link_friction = config.friction if sc.friction is None else sc.friction
+            if scene.parts:  # resting: a free body of convex parts, built by the scene
+                self.object = self._resting_object(scene, margin)
+                if sc.contact_erp is not None:
+                    p.setPhysicsEngineParameter(contactERP=float(sc.contact_erp))
+            else:  # fixed where the truth is
+                vertices, faces = scene.truth.vertices, scene.truth.faces
+            if scene.table_z is not None:
+                self.table = self._table(scene)
+        if vertices is not None and self.object is None:
             v = np.asarray(vertices, dtype=np.float64)
             f = np.asarray(faces, dtype=np.int64)
             col = p.createCollisionShape(
@@ -156,9 +181,26 @@ class ArmSimulation:
                 flags=pybullet.GEOM_FORCE_CONCAVE_TRIMESH,
             )
             self.object = p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=col)
-            p.changeDynamics(self.object, -1, lateralFriction=config.friction, restitution=0.0, **margin)
+            # in a scene the links' coefficient is the pair's (PyBullet multiplies the two bodies')
+            p.changeDynamics(self.object, -1, lateralFriction=config.friction if scene is None else 1.0,
+                             restitution=0.0, **margin)
         for j in [-1] + self.joints:
-            p.changeDynamics(self.arm, j, lateralFriction=config.friction, restitution=0.0, **margin)
+            # Two calls: PyBullet ignores the whole changeDynamics call on a link of a multibody when it
+            # carries collisionMargin (measured: lateralFriction unchanged); the margin alone stays a
+            # no-op there (the links keep PyBullet's 1 mm), the friction and restitution take.
+            p.changeDynamics(self.arm, j, lateralFriction=link_friction, restitution=0.0)
+            if margin:
+                p.changeDynamics(self.arm, j, **margin)
+        if config.mass_error > 0:  # the real arm differs from its model
+            from .scene import mass_scales
+
+            for j, f in zip(self.joints, mass_scales(len(self.joints), config.mass_error, config.mass_seed)):
+                info = p.getDynamicsInfo(self.arm, j)
+                p.changeDynamics(self.arm, j, mass=info[0] * float(f),
+                                 localInertiaDiagonal=[float(x) * float(f) for x in info[2]])
+        self.persistent = scene is not None and scene.config.persistent
+        if scene is not None and scene.parts:  # the arm waits far from the scene until a motion starts
+            p.resetBasePositionAndOrientation(self.arm, [50.0, 50.0, 50.0], [0.0, 0.0, 0.0, 1.0])
         self._pc = pybullet.POSITION_CONTROL
         self._world_frame = pybullet.WORLD_FRAME
         # The per-step calls bound to this client once: BulletClient's attribute lookup costs
@@ -169,6 +211,8 @@ class ArmSimulation:
         self._motor_array = functools.partial(pybullet.setJointMotorControlArray, physicsClientId=cid)
         self._external_torque = functools.partial(pybullet.applyExternalTorque, physicsClientId=cid)
         self.steps = 0
+        #: evaluation only: called with the world after every commanded step (never by the exploration)
+        self.step_observer = None
         self._torques = np.array(spec.joint_torques())
         self._sent = None
         self._axis = np.array([0.0, 0.0, 1.0])
@@ -183,7 +227,8 @@ class ArmSimulation:
         """Restore the initial physics state (every motion starts from the same state whatever ran
         before), put the base at ``T_world_base`` and the joints at rest at ``q0``; hold there.
         Returns the exact (q, dq, tau)."""
-        self._p.restoreState(self._state)
+        if not self.persistent:  # a persistent world keeps the object where the last motion left it
+            self._p.restoreState(self._state)
         self._axis = np.asarray(T_world_base, dtype=np.float64)[:3, 2].copy()  # every joint axis is the base z axis
         pos, quat = _pose_from_T(T_world_base)
         self._p.resetBasePositionAndOrientation(self.arm, pos, quat)
@@ -230,8 +275,49 @@ class ArmSimulation:
             self._apply_feed_forward(tau_ff)
         self._step_sim()
         self.steps += 1
+        if self.step_observer is not None:  # the evaluation's (explore3d.scene.SceneWatch)
+            self.step_observer(self)
         q, dq, _, tau = zip(*self._joint_states(self.arm, self.joints))
         return np.array(q, dtype=np.float64), np.array(dq, dtype=np.float64), np.array(tau, dtype=np.float64) + tau_ff
+
+    # --- the scene's bodies (built once) ------------------------------------------------------------
+    def _resting_object(self, scene, margin) -> int:
+        """A free body of the scene's convex parts at its settled pose, mass ``scene.mass_kg``."""
+        import pybullet
+
+        from .scene import parts_obj_text
+
+        p = self._p
+        fd, path = tempfile.mkstemp(suffix=".obj", prefix="explore3d_object_")
+        try:
+            with os.fdopen(fd, "w") as fh:
+                fh.write(parts_obj_text(scene.parts))
+            col = p.createCollisionShape(pybullet.GEOM_MESH, fileName=path)
+        finally:
+            os.unlink(path)
+        pos, quat = _pose_from_T(scene.T_object)
+        body = p.createMultiBody(baseMass=float(scene.mass_kg), baseCollisionShapeIndex=col, basePosition=pos,
+                                 baseOrientation=quat)
+        # PyBullet multiplies the two bodies' coefficients: 1 here leaves the links' and the table's own
+        p.changeDynamics(body, -1, lateralFriction=1.0, restitution=float(scene.config.restitution), **margin)
+        return body
+
+    def _table(self, scene) -> int:
+        """A static box whose top face is the plane z = ``scene.table_z``, 2 m square under the object."""
+        import pybullet
+
+        p = self._p
+        c = np.asarray(scene.truth.bounds, float).mean(axis=0)
+        col = p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[1.0, 1.0, 0.05])
+        body = p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=col,
+                                 basePosition=[float(c[0]), float(c[1]), float(scene.table_z) - 0.05])
+        p.changeDynamics(body, -1, lateralFriction=float(scene.config.table_friction), restitution=0.0)
+        return body
+
+    def step_passive(self) -> None:
+        """One physics step without commanding the arm (settling the scene)."""
+        self._step_sim()
+        self.steps += 1
 
     # --- evaluation only (oracle); never handed to the exploration ---------------------------------
     @property
