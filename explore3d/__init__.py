@@ -32,6 +32,8 @@ _EXPORTS = {
     "ThicknessCalibration": "calibration", "calibrate_thickness": "calibration",
     "ContactQuality": "quality", "contact_quality": "quality",
     "OutputConfig": "pipeline", "run_and_report": "pipeline", "quiet_c_output": "_quiet",
+    "SceneConfig": "scene", "SceneSetup": "scene", "SceneWatch": "scene", "settle_scene": "scene",
+    "scene_explore_config": "scene",
 }
 
 __all__ = sorted(_EXPORTS)

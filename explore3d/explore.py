@@ -3,7 +3,8 @@
 The robot is given the rough centre and a bounding radius of the object (the paper: the object
 is within reach), never its mesh; the mesh is handed only to the simulation (the world).
 Wraps are independent (each runs in a world of its own), so they are spread over processes with
-identical results for any number of jobs.
+identical results for any number of jobs; in a persistent scene (:mod:`explore3d.scene`: the object
+resting on a table stays where a wrap left it) they run in sequence in one world.
 """
 from __future__ import annotations
 

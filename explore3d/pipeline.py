@@ -36,6 +36,10 @@ class Result:
         carved: 3D runs with free space (``ExploreConfig.free_space``): the
             :class:`~explore3d.carve.CarveResult` of cutting the swept free space out of the hull,
             whose mesh is the estimate; else None (the estimate is the hull).
+        cut: on a table, the estimate cut at the table's plane
+            (:func:`explore3d.tabletop.cut_at_table`); else None.
+        setup: the settled scene (:class:`explore3d.scene.SceneSetup`) of a scene other than the
+            ideal one, else None; ``truth`` is then the object as it rested.
     """
 
     exploration: Exploration
@@ -375,6 +379,7 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
     from .metrics import shape_error
 
     if setup is None and not config.scene.ideal:
+        from .arm import load_arm
         from .scene import settle_scene
 
         setup = settle_scene(mesh, config.scene, load_arm(arm), config.sim)

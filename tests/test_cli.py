@@ -733,3 +733,14 @@ def test_sensing_and_contact_margin_options_reach_the_report(tmp_path, capsys, s
         code, _, err = run(capsys, "run", "cube", "--out", str(tmp_path / "x"), *bad)
         assert code == 2
         assert_one_line_error(err, word)
+
+
+def test_scene_option_maps_to_the_table_scene_config():
+    from explore3d.cli import explore_config
+    from explore3d.scene import scene_explore_config
+
+    cfg = explore_config({"scene": "table"})
+    assert cfg.scene == scene_explore_config("table").scene and cfg.sim.mass_error == 0.05
+    assert explore_config({"scene": "ideal"}).scene.ideal
+    with pytest.raises(Exception, match="scene"):
+        explore_config({"scene": "table", "mode": "planar"})

@@ -13,9 +13,9 @@ from explore3d.encircle import ControlConfig, run_wrap
 from explore3d.explore import ExploreConfig, wrap_poses
 from explore3d.freespace import swept_area
 from explore3d.kinematics import link_transforms
-from explore3d.motion import contact_segments, deep_free, moved_after
+from explore3d.motion import deep_free, moved_after
 from explore3d.objects import cube
-from explore3d.scene import SceneConfig, SceneSetup, pose_drift, scene_explore_config, settle_scene, object_pose
+from explore3d.scene import SceneConfig, pose_drift, scene_explore_config, settle_scene, object_pose
 from explore3d.sim import ArmSimulation, SimConfig
 from explore3d.tabletop import cut_at_table, support_points
 from explore3d.workspace import base_lowest_z, floor_stop, link_corners, lowest_z, plan_lowest_z, pose_clears
@@ -206,3 +206,30 @@ def test_moved_after_counts_contact_segments_that_swept_space_contradicts():
     assert moved_after([[], [on_arm, on_arm]], [[area], []], 1) == 2
     # a segment the sweep does not cover everywhere may still hold the contact
     assert moved_after([[partly, beside], []], [[], [area]], 1) == 0
+
+
+SMALL = ArmSpec(name="small12", n_links=12, link_length=0.025)
+
+
+def _small_table_run(density):
+    from explore3d.explore import explore
+    from explore3d.scene import SceneWatch
+
+    cfg = scene_explore_config("table", table_heights=1, table_angles=6, directions=1)
+    cfg = dataclasses.replace(cfg, scene=dataclasses.replace(cfg.scene, density=density))
+    m = cube(0.04)
+    setup = settle_scene(m, cfg.scene, SMALL, cfg.sim)
+    watch = SceneWatch(setup)
+    ex = explore(m, SMALL, cfg, setup=setup, after_wrap=watch.after_wrap)
+    return ex, watch.summary(ex)
+
+
+def test_a_light_object_pushed_away_is_noticed_and_a_heavy_one_is_not():
+    light, ls = _small_table_run(100.0)  # 6.4 g: the gentle sweeps still shove it
+    heavy, hs = _small_table_run(20000.0)  # 1.28 kg: stays
+    assert ls["max_drift_m"] > 0.02 and light.moved.any()
+    # a flagged wrap is repeated once, from the same pose
+    i = int(np.nonzero(light.redone)[0][0])
+    assert light.moved[i - 1] and np.array_equal(light.poses[i].T_world_base, light.poses[i - 1].T_world_base)
+    assert hs["max_drift_m"] < 1e-3 and not heavy.moved.any() and not heavy.redone.any()
+    assert len(hs["drift_after_wrap_m"]) == heavy.n_wraps
