@@ -596,10 +596,10 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
         from .quality import contact_quality
 
         t0 = time.perf_counter()
-        report["contact_quality"] = contact_quality(res.exploration, mesh).to_dict()  # evaluation only
+        report["contact_quality"] = contact_quality(res.exploration, mesh if res.setup is None else res.truth).to_dict()  # evaluation only
         timings["quality_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    files = write_result(res, mesh, out, output.fmt, pictures=output.pictures, density=output.density,
+    files = write_result(res, mesh if res.setup is None else res.truth, out, output.fmt, pictures=output.pictures, density=output.density,
                          height=output.height)
     timings["write_s"] = time.perf_counter() - t0
     report["files"] = sorted(files + ["report.json"])

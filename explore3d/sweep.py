@@ -66,11 +66,11 @@ _REPORT_TIMING_KEYS = ("timings", "wall_s")
 #: Settings a grid may sweep, each an option of ``explore3d run`` (see ``explore3d run --help``).
 SWEEP_KEYS = ("a", "angles", "arm", "attempts", "base_step", "clearance", "collision_margin", "directions",
               "encircle", "face_offset", "fingers", "method", "mirrored", "mode", "n_along", "n_height", "offsets", "points", "probes",
-              "seed", "sensing", "size")
+              "scene", "seed", "sensing", "size")
 
 #: Settings left out of the canonical settings when they have these values (what ``run`` does
 #: without them), so ``--grid a=0.05`` and no ``a`` at all are the same combination.
-_DEFAULTS = {"arm": "default", "method": "exponential", "mode": "3d", "encircle": "straight"}
+_DEFAULTS = {"arm": "default", "method": "exponential", "mode": "3d", "encircle": "straight", "scene": "ideal"}
 
 _BOOL_WORDS = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
 
