@@ -52,7 +52,7 @@ class SceneConfig:
         table_clearance: the arm's planned motion keeps every link this far above the table, m.
         contact_erp: the world's contact error reduction (PyBullet ``contactERP``) with a resting
             object (None, the default: PyBullet's 0.2).  Measured on the cube resting on the table
-            (gentle sweeps, frictionless links, 5 wraps): at 0.2 a link striking it was pushed out
+            (gentle sweeps, frictionless links, Dantzig solver, 5 wraps): at 0.2 a link striking it was pushed out
             of the 1 mm contact margin within one step and kicked the cube to 126 mm/s (4.2 mm, 3.9
             degrees of drift), at 0.02 the drift was 0.5 mm, 0.4 degrees; but at 0.02 the joints
             tracked their references more loosely and every joint's sweep fired in free space
