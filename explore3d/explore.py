@@ -180,7 +180,7 @@ class ExploreConfig:
         d["faces"] = list(self.faces)
         return d
 
-    def floor_z(self, spec: ArmSpec, table_z: float | None) -> float | None:
+    def floor_z(self, table_z: float | None) -> float | None:
         """The plane, world z, m, the arm's plan stays above: the table plus the scene's clearance."""
         return None if table_z is None or not self.scene.table else float(table_z) + self.scene.table_clearance
 
@@ -218,8 +218,8 @@ class Exploration:
         moved: (n_wraps,) bool: after the wrap the object seemed to have moved, by the robot's own
             contacts and swept space (:func:`explore3d.motion.moved_after`; persistent worlds only,
             else all False).
-        redone: (n_wraps,) bool: the wrap repeats the one before it, with lighter sweeps, because
-            that one was flagged in ``moved``.
+        redone: (n_wraps,) bool: the wrap repeats the one before it (same pose and settings)
+            because that one was flagged in ``moved``.
     """
 
     spec: ArmSpec
@@ -268,7 +268,7 @@ def wrap_poses(spec: ArmSpec, config: ExploreConfig, centre, radius: float, tabl
     if config.scene.table:
         if table_z is None:
             raise ValueError("a table scene's wraps need the table's height: pass table_z (world z of its top, m)")
-        floor = config.floor_z(spec, table_z)
+        floor = config.floor_z(table_z)
         lowest = spec.base_size / 2.0 + config.scene.table_clearance + 1.0e-3
         poses = table_wrap_poses(centre, radius, spec.link_width, table_z, lowest, config.table_heights,
                                  config.table_angles, config.directions, config.angles, clearance=config.clearance)
@@ -522,7 +522,7 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
     centre = c0 if centre is None else np.asarray(centre, float)
     radius = r0 if radius is None else float(radius)
     table_z = None if setup is None else setup.table_z
-    floor_z = config.floor_z(spec, table_z)
+    floor_z = config.floor_z(table_z)
     poses = list(wrap_poses(spec, config, centre, radius, table_z))
     band = cached_band(spec, config.control, config.sim, config.sensors, config.mode == "planar")
     band_s = time.perf_counter() - t0
@@ -537,6 +537,7 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
     jobs = min(jobs, len(poses)) if not probing else jobs
     moved: list[bool] = []
     redone: list[bool] = []
+    segments: list[list] = []  # per wrap, its contact segments (persistent worlds: the motion flag)
     runner = (_PersistentRunner(spec, config, setup, after_wrap) if persistent
               else _WrapRunner(spec, vertices, faces, config, jobs, setup, after_wrap))
     def task(i, p):
@@ -560,7 +561,7 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
                 while True:
                     i = len(results)
                     results.append(next(iter(runner.map([task(i, p)]))))
-                    moved.append(_moved(spec, results, config, centre, radius))
+                    moved.append(_moved(spec, results, segments, config, centre, radius))
                     redone.append(redo)
                     if progress:
                         progress(len(results), len(poses))
@@ -595,12 +596,13 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
     )
 
 
-def _moved(spec, results, config, centre, radius) -> bool:
+def _moved(spec, results, segments, config, centre, radius) -> bool:
     """Whether, after the last wrap in ``results``, the object seems to have moved
-    (:func:`explore3d.motion.moved_after` of the wraps' contact segments and swept space)."""
+    (:func:`explore3d.motion.moved_after` of the wraps' contact segments and swept space).
+    ``segments`` (per wrap, its contact segments) is extended with the last wrap's."""
     from .motion import DEFAULT_MIN_SEGMENTS, contact_segments, moved_after
 
+    segments.append(contact_segments(spec, results[-1][0], centre, radius))
     if not config.free_space:
         return False
-    segs = [contact_segments(spec, r[0], centre, radius) for r in results]
-    return moved_after(segs, [r[4] for r in results], len(results) - 1) >= DEFAULT_MIN_SEGMENTS
+    return moved_after(segments, [r[4] for r in results], len(results) - 1) >= DEFAULT_MIN_SEGMENTS

@@ -97,8 +97,7 @@ def table_contacts(ex: Exploration) -> int:
     clearance above its known height) and were left out of the hull; 0 without a table."""
     if ex.table_z is None or ex.contacts is None or not len(ex.contacts):
         return 0
-    floor = ex.table_z + ex.config.scene.table_clearance
-    return int(((ex.contacts.points[:, 2] <= floor) & ~ex.contacts.self_contact).sum())
+    return int(((ex.contacts.points[:, 2] <= ex.config.floor_z(ex.table_z)) & ~ex.contacts.self_contact).sum())
 
 
 def sensed_z_band(ex: Exploration) -> tuple[float, float]:

@@ -26,7 +26,7 @@ import numpy as np
 from ._validate import check_field
 
 __all__ = ["SceneConfig", "SceneSetup", "SCENE_NAMES", "convex_parts", "settle_scene", "pose_drift",
-           "mass_scales", "parts_obj_text"]
+           "parts_obj_text"]
 
 from .defaults import SCENE_NAMES  # noqa: E402  the named scenes of ``--scene``
 
@@ -108,15 +108,6 @@ class SceneConfig:
 
     def to_dict(self) -> dict:
         return asdict(self)
-
-
-def mass_scales(n: int, mass_error: float, seed: int) -> np.ndarray:
-    """(n,) factors of the simulated links' masses over the model's: ``1 + e``, ``e`` uniform in
-    ``[-mass_error, mass_error]``, seeded (ones when ``mass_error`` is 0)."""
-    if mass_error == 0:
-        return np.ones(n)
-    rng = np.random.default_rng([int(seed), 7919])
-    return 1.0 + rng.uniform(-mass_error, mass_error, n)
 
 
 def _is_convex(mesh) -> bool:

@@ -74,7 +74,7 @@ class SimConfig:
             each other (the behaviour before self-collision existed).
         mass_error: the simulated arm's link masses and inertias differ from its model (the
             controller's) by a factor ``1 + e`` per link, ``e`` drawn uniformly from
-            ``[-mass_error, mass_error]`` with ``mass_seed`` (:func:`explore3d.scene.mass_scales`;
+            ``[-mass_error, mass_error]`` with ``mass_seed`` (:func:`mass_scales`;
             0: the model is exact).  The contact band is measured on this arm (as a robot measures
             its own free motion), the gravity feed-forward and the localisation use the model.
         mass_seed: seed of the mass error.
@@ -109,6 +109,15 @@ class SimConfig:
             raise ValueError(f"SimConfig.gravity must be 3 finite numbers, m/s^2, world frame; got {self.gravity!r}")
 
 
+def mass_scales(n: int, mass_error: float, seed: int) -> np.ndarray:
+    """(n,) factors of the simulated links' masses over the model's: ``1 + e``, ``e`` uniform in
+    ``[-mass_error, mass_error]``, seeded (ones when ``mass_error`` is 0)."""
+    if mass_error == 0:
+        return np.ones(n)
+    rng = np.random.default_rng([int(seed), 7919])
+    return 1.0 + rng.uniform(-mass_error, mass_error, n)
+
+
 def _pose_from_T(T) -> tuple[list, list]:
     """(position (3,), quaternion (x, y, z, w)) of a (4, 4) homogeneous transform."""
     from scipy.spatial.transform import Rotation
@@ -135,7 +144,6 @@ class ArmSimulation:
 
         self.spec = spec
         self.config = config
-        self.scene = scene
         with quiet_c_output():  # PyBullet's C-level banners: build time, argv[0]=, solver switch
             import pybullet
             from pybullet_utils import bullet_client
@@ -192,8 +200,6 @@ class ArmSimulation:
             if margin:
                 p.changeDynamics(self.arm, j, **margin)
         if config.mass_error > 0:  # the real arm differs from its model
-            from .scene import mass_scales
-
             for j, f in zip(self.joints, mass_scales(len(self.joints), config.mass_error, config.mass_seed)):
                 info = p.getDynamicsInfo(self.arm, j)
                 p.changeDynamics(self.arm, j, mass=info[0] * float(f),

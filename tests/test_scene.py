@@ -85,7 +85,7 @@ def test_table_wraps_start_above_the_table_and_include_tilted_ones():
     table_z = float(m.bounds[0, 2])
     cfg = scene_explore_config("table")
     poses = wrap_poses(DEFAULT, cfg, np.zeros(3), 0.0727, table_z)
-    floor = cfg.floor_z(DEFAULT, table_z)
+    floor = cfg.floor_z(table_z)
     assert poses and all(pose_clears(DEFAULT, p.T_world_base, floor) for p in poses)
     assert all(base_lowest_z(DEFAULT, p.T_world_base) >= floor for p in poses)
     normals = np.array([p.normal for p in poses])
@@ -106,7 +106,7 @@ def test_no_wrap_plan_passes_below_the_table():
     cfg = ExploreConfig(scene=sc, probes=None)
     setup = settle_scene(m, sc, DEFAULT)
     table_z = setup.table_z
-    floor = cfg.floor_z(DEFAULT, table_z)
+    floor = cfg.floor_z(table_z)
     poses = wrap_poses(DEFAULT, cfg, np.zeros(3), 0.0727, table_z)
     tilted = [p for p in poses if abs(p.normal[2]) < 0.9]
     # the tilted poses whose straight arm, swept about the base joint, would dip below the table most
