@@ -7,7 +7,8 @@ bridges every concavity the arm did not touch; but wherever a link passed, there
 centre is free are found, a morphological opening drops thin shells (free space grazing the
 estimate's surface where the arm touched it: carving those would only roughen a right surface)
 and what is left is cut out of the estimate with a mesh boolean (manifold3d).  Where nothing is
-left to cut, the estimate comes back unchanged.  Lengths in metres.
+left to cut, the estimate comes back unchanged.  The slivers the cut leaves beside
+the estimate's body are dropped and listed (:func:`explore3d.bodies.one_body`).  Lengths in metres.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .bodies import one_body
 from .freespace import is_free
 
 __all__ = ["CarveResult", "carve", "DEFAULT_VOXEL_M", "DEFAULT_OPENING_VOXELS"]
@@ -40,12 +42,15 @@ class CarveResult:
         inside_m3: the estimate's volume as voxels, m^3.
         free_m3: of it, the volume swept free, m^3.
         carved_m3: the volume cut out (after the opening), m^3.
+        dropped_m3: the volumes (m^3) of the slivers the cut left beside the estimate's body,
+            dropped (:func:`explore3d.bodies.one_body`); empty when there were none.
     """
 
     mesh: object
     inside_m3: float
     free_m3: float
     carved_m3: float
+    dropped_m3: tuple[float, ...] = ()
 
 
 def _grid(bounds: np.ndarray, voxel_m: float):
@@ -110,7 +115,8 @@ def carve(mesh, areas, voxel_m: float = DEFAULT_VOXEL_M, opening_voxels: int = D
         log.warning("carving skipped: the swept free space gave no closed cutting volume (%s)", exc)
         return unchanged
     carved = float((cut[1:-1, 1:-1, 1:-1] & ~outside[1:-1, 1:-1, 1:-1]).sum()) * vol
-    return dataclasses.replace(unchanged, mesh=out, carved_m3=carved)
+    out, dropped = one_body(out)
+    return dataclasses.replace(unchanged, mesh=out, carved_m3=carved, dropped_m3=dropped)
 
 
 def _contains(mesh, points: np.ndarray) -> np.ndarray:

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .bodies import one_body
+
 __all__ = ["support_points", "cut_at_table"]
 
 
@@ -28,8 +30,9 @@ def support_points(points, table_z: float, layer_m: float) -> np.ndarray:
 
 def cut_at_table(mesh, table_z: float):
     """``mesh`` (closed trimesh, world frame) without the part below z = ``table_z``, capped with
-    the table's face (closed); ``mesh`` itself when nothing of it is below."""
+    the table's face (closed), without the slivers the cut leaves (:func:`explore3d.bodies.one_body`);
+    ``mesh`` itself when nothing of it is below."""
     if float(mesh.bounds[0, 2]) >= float(table_z):
         return mesh
     out = mesh.slice_plane([0.0, 0.0, float(table_z)], [0.0, 0.0, 1.0], cap=True)
-    return out
+    return one_body(out)[0]
