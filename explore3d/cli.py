@@ -21,7 +21,7 @@ import math
 import sys
 from pathlib import Path
 
-from .defaults import DEFAULT_A
+from .defaults import DEFAULT_A, MAX_A
 from .defaults import ESTIMATOR_NAMES, SCENE_NAMES
 
 PROG = "explore3d"
@@ -70,6 +70,17 @@ def _positive(name):
             raise UsageError(f"{name} must be > 0; got {text!r}")
         return v
     f.__name__ = name  # argparse names the type in its own messages
+    return f
+
+
+def _coarseness(name):
+    def f(text):
+        v = _number(text, name)
+        if not 0 < v <= MAX_A:
+            raise UsageError(f"{name} must be > 0 and at most {MAX_A:g} (the inverse hull's coarseness: the paper "
+                             f"uses 0.05-0.5, the default is {DEFAULT_A}); got {text!r}")
+        return v
+    f.__name__ = name
     return f
 
 
@@ -147,7 +158,7 @@ RUN_OPTIONS = {
     "mode": _choice("mode", MODES),
     "directions": _int_min("--directions"),
     "attempts": _int_min("--attempts"),
-    "a": _positive("--a"),
+    "a": _coarseness("--a"),
     "method": _choice("method", METHODS),
     "seed": _int_any("--seed"),
     "jobs": _int_min("--jobs"),
@@ -254,7 +265,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--attempts", type=RUN_OPTIONS["attempts"], help="attempts per wrap")
     r.add_argument("--offsets", type=RUN_OPTIONS["offsets"], help="3d: planes per normal")
     r.add_argument("--angles", type=RUN_OPTIONS["angles"], help="3d: approach angles per plane")
-    r.add_argument("--a", type=RUN_OPTIONS["a"], help=f"inverse-hull coarseness > 0 (default {DEFAULT_A}, as explore3d.run)")
+    r.add_argument("--a", type=RUN_OPTIONS["a"], help=f"inverse-hull coarseness in (0, {MAX_A:g}] (default {DEFAULT_A}, as explore3d.run)")
     r.add_argument("--method", type=RUN_OPTIONS["method"], help="exponential (default) or spherical")
     r.add_argument("--seed", type=RUN_OPTIONS["seed"], help="seed of the error-measure surface samples (default 0)")
     r.add_argument("--jobs", type=RUN_OPTIONS["jobs"], help="worker processes >= 1 (default: all cores; results do not depend on it)")
@@ -322,7 +333,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "(planar runs) give a polygon: --out X.json, or a mesh extruded by --height.")
     c.add_argument("points", help="point file (PLY, XYZ, or anything trimesh loads)")
     c.add_argument("--out", required=True, help="output mesh (.obj .stl .ply .off .glb) or polygon .json")
-    c.add_argument("--a", type=RUN_OPTIONS["a"], default=DEFAULT_A, help=f"coarseness > 0 (default {DEFAULT_A}, as run)")
+    c.add_argument("--a", type=RUN_OPTIONS["a"], default=DEFAULT_A, help=f"coarseness in (0, {MAX_A:g}] (default {DEFAULT_A}, as run)")
     c.add_argument("--method", type=RUN_OPTIONS["method"], default="exponential")
     c.add_argument("--free-space", metavar="NPZ", default=None,
                    help="carve the 3D hull with the space the arm swept through (the free_space.npz a run wrote), "
@@ -379,7 +390,7 @@ def build_parser() -> argparse.ArgumentParser:
     t = sub.add_parser("table1", help="the paper's Table 1 next to ours",
                        description="Reproduce Table 1 of the paper (explore3d.table1.table1_rows).")
     t.add_argument("--json", action="store_true", help="print JSON")
-    t.add_argument("--a", type=RUN_OPTIONS["a"], help="inverse-hull coarseness > 0 (default: table1_rows' own, 0.2)")
+    t.add_argument("--a", type=RUN_OPTIONS["a"], help=f"inverse-hull coarseness in (0, {MAX_A:g}] (default: table1_rows' own, 0.2)")
     t.add_argument("--seed", type=RUN_OPTIONS["seed"], help="seed of the simulated many-links case")
     t.add_argument("--3d", dest="three_d", action="store_true",
                    help="also the default arm's 3D volume errors on the cube, cylinder and sphere, with and "
@@ -556,7 +567,7 @@ def cmd_run(args) -> int:
 
     with quiet_c_output():  # PyBullet's banners (import, connect, solver switch, renderer)
         from .arm import load_arm
-        from .pipeline import NoContactError, OutputConfig, ReconstructionError, run_and_report
+        from .pipeline import NoContactError, OutputConfig, ReconstructionError, check_run_inputs, run_and_report
 
         try:
             spec = load_arm(opts["arm"])
@@ -573,6 +584,7 @@ def cmd_run(args) -> int:
 
         mesh = load_object(opts["object"], scale=opts.get("scale"), size=opts.get("size"))
         log.info("object %s: extents %s m", opts["object"], np.round(mesh.extents, 4).tolist())
+        check_run_inputs(mesh, spec, config, opts["a"], opts["method"], opts.get("centre"), opts.get("radius"))
 
         bar = None
         if not args.quiet:
@@ -643,6 +655,10 @@ def cmd_reconstruct(args) -> int:
     radius = math.inf if args.radius is None else args.radius
     kept = int(hull_input_mask(pts, wrap, c, radius).sum())
     if kept <= pts.shape[1]:
+        if args.radius is None:
+            raise RunError(f"only {kept} of {len(pts)} points agree with the other wraps: too few for a "
+                           f"{pts.shape[1]}D hull (at least {pts.shape[1] + 1} not in one "
+                           f"{'line' if pts.shape[1] == 2 else 'plane'}); pass the points of a whole exploration")
         raise RunError(f"only {kept} of {len(pts)} points lie within --radius {args.radius:g} m of "
                        f"--centre {','.join(f'{x:g}' for x in c)} and agree with the other wraps; check both (see "
                        "report.json's config.centre_m and config.radius_m)")
@@ -896,9 +912,20 @@ def cmd_objects(args) -> int:
 # --- entry point ---------------------------------------------------------------------------------
 
 def _setup_logging(verbose: int) -> None:
+    """Log records of explore3d at WARNING (INFO with -v, DEBUG with -vv) to the terminal's stderr,
+    also inside :func:`~explore3d._quiet.quiet_c_output` (whose block points fd 2 at /dev/null: the
+    handler writes to whatever ``sys.stderr`` is at the time, which the block keeps on the terminal)."""
+    from ._quiet import STDERR
+
     level = logging.WARNING if not verbose else (logging.INFO if verbose == 1 else logging.DEBUG)
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
-    logging.getLogger("explore3d").setLevel(level)
+    logger = logging.getLogger("explore3d")
+    logger.setLevel(level)
+    if not any(getattr(h, "_explore3d_cli", False) for h in logger.handlers):
+        handler = logging.StreamHandler(STDERR)
+        handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+        handler._explore3d_cli = True
+        logger.addHandler(handler)
+        logger.propagate = False
 
 
 def _say(msg: str) -> None:
@@ -928,4 +955,27 @@ def main(argv=None) -> int:
         if isinstance(exc, OSError) and exc.filename is not None:
             msg = f"{exc.strerror or exc} : {exc.filename}; check the path and permissions"
         _say(msg)
+        log.debug("the error in full", exc_info=True)
         return 1
+    except Exception as exc:  # noqa: BLE001 - the library's and its dependencies' other errors: one line each
+        _say(library_error_message(exc))
+        log.debug("the error in full", exc_info=True)
+        return 1
+
+
+def library_error_message(exc: BaseException) -> str:
+    """One line for an error of the library or a dependency that no command turned into a usage or
+    run error: what failed (by the error's origin) and what to try."""
+    kind, module = type(exc).__name__, type(exc).__module__ or ""
+    text = " ".join(str(exc).split()) or kind
+    if isinstance(exc, MemoryError):
+        return ("out of memory; use a smaller object or rough bound (--size, --radius), fewer wraps "
+                "(--directions/--attempts) or fewer --jobs")
+    if module.startswith("pybullet"):
+        return (f"the simulator failed ({text}); check the object mesh (closed, at most "
+                "explore3d.pipeline.MAX_OBJECT_FACES faces, in metres) and the arm's URDF")
+    if module.startswith("sqlite3"):
+        return f"database error ({kind}: {text}); move the sweep folder's sweep.db away or choose another --out"
+    if isinstance(exc, (FloatingPointError, ArithmeticError)):
+        return f"numerical failure ({kind}: {text}); check the inputs' sizes and --a"
+    return f"unexpected {kind}: {text}; run again with -vv for the details and report it"

@@ -165,9 +165,11 @@ def compare(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: flo
     """
     import dataclasses
 
+    from .arm import load_arm
     from .explore import explore
-    from .pipeline import rough_bound_or
+    from .pipeline import check_run_inputs, rough_bound_or
 
+    check_run_inputs(mesh, load_arm(arm), config, a, "exponential", centre, radius)
     config = dataclasses.replace(config, points="contacts")
     centre, radius = rough_bound_or(mesh, centre, radius)
     ex = explore(mesh, arm, config, centre=centre, radius=radius, progress=progress)

@@ -6,6 +6,12 @@ so the command line reads them without loading numpy).  One value per concept.""
 #: corners tighter; 0.05 cuts a dense square's corners by 0.4 % of its area (explore3d.hull).
 DEFAULT_A = 0.05
 
+#: The largest inverse-hull coarseness accepted.  The paper tried 0.05-0.5; at a = 10 the hull of
+#: r**-a already keeps only the points nearest the centre along each ray, and r**-a overflows
+#: float64 (1.8e308) once a * log10(1/r) > 308: for a <= 10 only below r = 1e-30 m, so no real
+#: point set overflows (a = 300 did, for r = 0.04 m, after a whole exploration).
+MAX_A = 10.0
+
 #: The paper's ``a`` (section IV), used only by its replica (:mod:`explore3d.table1`,
 #: :func:`explore3d.simulated.simulated_case`).
 PAPER_A = 0.2

@@ -40,7 +40,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from explore3d._validate import check_points, check_positive, check_vector
-from explore3d.defaults import DEFAULT_A
+from explore3d.defaults import DEFAULT_A, MAX_A
 from explore3d.tolerances import DEGENERACY_RTOL, MERGE_DISTANCE_M
 
 __all__ = ["InverseHull", "inverse_hull", "invert_points", "merge_close_points", "METHODS", "BACKENDS"]
@@ -103,6 +103,15 @@ def merge_close_points(points, distance: float = MERGE_DISTANCE_M) -> np.ndarray
     return first[label]
 
 
+def check_a(a) -> float:
+    """``a`` as a float if 0 < a <= :data:`~explore3d.defaults.MAX_A`, else ValueError naming the range."""
+    a = check_positive(a, "a")
+    if a > MAX_A:
+        raise ValueError(f"a must be at most {MAX_A:g} (the inverse hull's coarseness); got {a!r} (the paper uses "
+                         f"0.05-0.5, the default is {DEFAULT_A})")
+    return a
+
+
 def _check_method(method) -> str:
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
@@ -127,7 +136,7 @@ def invert_points(points, centre, a: float = DEFAULT_A, method: str = "exponenti
     """
     pts = check_points(points, "points")
     c = check_vector(centre, "centre", pts.shape[1])
-    a = check_positive(a, "a")
+    a = check_a(a)
     method = _check_method(method)
     rel = pts - c
     r = np.linalg.norm(rel, axis=1)
@@ -347,7 +356,7 @@ def inverse_hull(
     need = d + 1
     if len(all_pts) < need:
         raise ValueError(f"points needs at least {need} points in {d}D for a {d}D hull; got {len(all_pts)}")
-    a = check_positive(a, "a")
+    a = check_a(a)
     method = _check_method(method)
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}; got {backend!r}")

@@ -404,10 +404,20 @@ def _resolve_path(spec) -> Path:
 
 def _read_mesh(path: Path) -> trimesh.Trimesh:
     try:
-        loaded = trimesh.load(str(path))
+        # unprocessed first: trimesh's processing silently drops the faces of non-finite vertices
+        # (the truth would become another solid); processed below, as trimesh.load(path) would
+        loaded = trimesh.load(str(path), process=False)
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise MeshError(f"cannot read {path.name} as a mesh ({type(exc).__name__}: {exc}); "
                         "pass a mesh file trimesh reads (STL, OBJ, PLY, OFF, GLB, ...)") from None
+    parts = loaded.geometry.values() if isinstance(loaded, trimesh.Scene) else [loaded]
+    for part in parts:
+        if isinstance(part, trimesh.Trimesh):
+            bad = int((~np.isfinite(np.asarray(part.vertices, dtype=float))).any(axis=1).sum())
+            if bad:
+                raise MeshError(f"{path.name} has {bad} vertices with a non-finite (NaN or inf) coordinate; "
+                                "fix or remove them in the file (a mesh of finite coordinates in metres)")
+            part.process()
     if isinstance(loaded, trimesh.Scene):
         if len(loaded.geometry) == 0:
             raise MeshError(f"{path.name} contains no triangles (empty file or not a mesh format trimesh "

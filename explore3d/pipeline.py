@@ -354,6 +354,51 @@ def rough_bound_or(mesh, centre=None, radius=None) -> tuple[np.ndarray, float]:
     return c, r
 
 
+#: The most triangles an object may have: PyBullet's createCollisionShape from arrays fails above
+#: a vertex/index budget of its own (measured with pybullet 3.2.7: a 122,880-face mesh loads,
+#: 184,320 faces fail with "createCollisionShape failed" after seconds of work).
+MAX_OBJECT_FACES = 120_000
+
+
+def check_run_inputs(mesh, spec, config, a, method, centre, radius) -> None:
+    """Refuse, before any simulation, what :func:`run` cannot use: a ``mesh`` that is not a closed
+    trimesh of finite coordinates or has more than :data:`MAX_OBJECT_FACES` faces, a ``config``
+    that is not an :class:`ExploreConfig`, an ``a`` or ``method`` the inverse hull rejects, and an
+    object that does not fit the arm ``spec``: a rough radius (``radius``, m, or the mesh's own:
+    :func:`rough_bound_or`) beyond the arm's length (it cannot reach round it) or an object
+    smaller than one link's width (nothing of its shape can be resolved).  ValueError (TypeError
+    for wrong types) naming the fix."""
+    import trimesh
+
+    from .hull import _check_method, check_a
+    from .metrics import check_volume
+
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise TypeError(f"mesh must be a trimesh.Trimesh (e.g. explore3d.load_object('cube')); got {type(mesh).__name__}")
+    if not isinstance(config, ExploreConfig):
+        raise TypeError(f"config must be an explore3d.ExploreConfig (e.g. ExploreConfig(directions=4)); got "
+                        f"{type(config).__name__}")
+    bad = int((~np.isfinite(np.asarray(mesh.vertices, dtype=float))).any(axis=1).sum())
+    if bad:
+        raise ValueError(f"mesh has {bad} vertices with a non-finite (NaN or inf) coordinate; fix or remove them")
+    if len(mesh.faces) > MAX_OBJECT_FACES:
+        raise ValueError(f"mesh has {len(mesh.faces)} faces, more than the simulator takes ({MAX_OBJECT_FACES}); "
+                         "simplify it (e.g. trimesh's simplify_quadric_decimation) first")
+    check_volume(mesh, "mesh")
+    check_a(a)
+    _check_method(method)
+    _, radius = rough_bound_or(mesh, centre, radius)
+    if radius > spec.reach:
+        raise ValueError(f"the object's rough radius {radius:.3g} m exceeds the arm's length {spec.reach:.3g} m ({spec.name}: "
+                         f"{spec.n_links} links of {spec.link_length:g} m): it cannot reach round it; use a smaller "
+                         "object (load_object(size=), --size) or a longer arm (--arm)")
+    across = float(np.max(mesh.extents))
+    if across < spec.link_width:
+        raise ValueError(f"the object is {across:.3g} m across, smaller than the arm's link width {spec.link_width:g} m: "
+                         "the arm cannot resolve its shape; use a larger object (load_object(size=), --size) or a "
+                         "finer arm (--arm)")
+
+
 def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float = DEFAULT_A,
         method: str = "exponential", progress=None, *, centre=None, radius=None, seed: int = 0,
         setup=None, after_wrap=None) -> Result:
@@ -378,13 +423,15 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
         NoContactError: the arm touched nothing (the object is out of reach or too big).
         ReconstructionError: the contact points gave no hull (a ValueError).
     """
+    from .arm import load_arm
     from .metrics import shape_error
 
+    spec = load_arm(arm)
+    check_run_inputs(mesh, spec, config, a, method, centre, radius)
     if setup is None and not config.scene.ideal:
-        from .arm import load_arm
         from .scene import settle_scene
 
-        setup = settle_scene(mesh, config.scene, load_arm(arm), config.sim)
+        setup = settle_scene(mesh, config.scene, spec, config.sim)
     truth = mesh if setup is None else setup.truth  # the object as it rests
     centre, radius = rough_bound_or(truth, centre, radius)
     ex = explore(mesh, arm, config, centre=centre, radius=radius, progress=progress, setup=setup,
