@@ -416,8 +416,13 @@ def build_parser() -> argparse.ArgumentParser:
                                    "pybullet_data:PATTERN) and the --grid settings once, as 'explore3d run' would "
                                    "(no pictures), storing each result as it finishes in OUT/sweep.db and its estimate "
                                    "in OUT/runs/<key>/.  Run the same command again to finish a killed sweep: only "
-                                   "the combinations without a row run.  Failed runs (also crashed workers) are "
-                                   "stored with a one-line reason.  Settings: " + ", ".join(_sweep_keys()) + ".")
+                                   "the combinations without a row run (and runs lost to a killed or vanished "
+                                   "worker).  Failed runs (also crashed workers) are stored with a one-line reason.  "
+                                   "One sweep at a time per --out folder (a second one refuses to start).  Settings: "
+                                   + ", ".join(_sweep_keys()) + ".  Exit codes: 0 at least one combination is stored "
+                                   "as ok (failures, if any, are counted in one line on stderr); 1 every combination "
+                                   "failed, another sweep runs on --out, --out holds a sweep.db that is not a "
+                                   "sweep's, or --out cannot be written; 2 a usage error; 130 interrupted.")
     w.add_argument("objects", nargs="+", help="built-in names, mesh files, globs or pybullet_data:PATTERN (quote globs)")
     w.add_argument("--out", required=True, help="output folder (sweep.db, runs/, truths/)")
     w.add_argument("--size", type=RUN_OPTIONS["size"], help="rescale every object so its longest side is SIZE metres")
@@ -433,16 +438,19 @@ def build_parser() -> argparse.ArgumentParser:
                         "--ray-address / $RAY_ADDRESS (pip install 'explore3d[ray]')")
     w.add_argument("--ray-address", help="an existing Ray cluster (implies --ray)")
     w.add_argument("--retry-failed", action="store_true", help="also run the combinations stored as failures again")
-    w.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary line")
+    w.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar, no summary line (failures are still counted in one line on stderr)")
     w.set_defaults(func=cmd_sweep)
 
     sr = sub.add_parser("sweep-report", help="tables, a plot and an HTML page of a sweep",
                         description="Write report.md and report.csv (per object and setting: error, IoU, Chamfer, "
                                     "time, failures), errors.png (error against each swept setting) and report.html "
                                     "(the table with a thumbnail per run: the estimate coloured by its signed "
-                                    "distance to the truth, mm) for the sweep in DIR.")
+                                    "distance to the truth, mm) for the sweep in DIR.  DIR is only read (its "
+                                    "sweep.db opened read-only).  Exit codes: 0 written; 1 DIR holds no sweep, its "
+                                    "sweep.db is not a sweep's, or the report cannot be written; 2 a usage error.")
     sr.add_argument("folder", metavar="DIR", help="the --out folder of 'explore3d sweep'")
-    sr.add_argument("--out", help="folder for the report (default: DIR/report)")
+    sr.add_argument("--out", help="folder for the report (default: DIR/report; give another for a read-only DIR)")
     sr.add_argument("--no-thumbnails", dest="thumbnails", action="store_false", help="skip the thumbnails (faster)")
     sr.set_defaults(func=cmd_sweep_report)
 
@@ -804,10 +812,13 @@ def _sweep_keys():
 
 
 def cmd_sweep(args) -> int:
-    """Parse -> :func:`explore3d.sweep.run_sweep` -> one summary line."""
+    """Parse -> :func:`explore3d.sweep.run_sweep` -> one summary line (stdout), and one line on
+    stderr counting the failed combinations, if any.  Exit code 0 when at least one combination is
+    stored as ok, 1 when every one failed (or the sweep could not start: folder busy, not a sweep's
+    database, not writable), 2 for a usage error."""
     import os
 
-    from .sweep import parse_grid, read_grid_file, run_sweep, sweep_tasks
+    from .sweep import SweepBusyError, SweepDatabaseError, parse_grid, read_grid_file, run_sweep, sweep_tasks
 
     try:
         grid = read_grid_file(args.grid_file) if args.grid_file else {}
@@ -820,11 +831,20 @@ def cmd_sweep(args) -> int:
         s = run_sweep(args.objects, args.out, grid, size=args.size, workers=args.workers,
                       jobs_per_run=args.jobs_per_run, backend=backend, ray_address=args.ray_address,
                       retry_failed=args.retry_failed, progress=not args.quiet)
+    except (SweepBusyError, SweepDatabaseError) as exc:
+        raise RunError(str(exc)) from None
     except OSError as exc:
         raise RunError(f"cannot write the sweep to {args.out} ({exc.strerror or exc}); choose a writable --out") from None
     if not args.quiet:
+        lost = f", {s.lost} lost" if s.lost else ""
         print(f"sweep: {s.total} combinations, {s.stored_before} stored before, {s.ran} run ({s.ok} ok, "
-              f"{s.failed} failed) on {backend} -> {Path(args.out) / 'sweep.db'}")
+              f"{s.failed} failed{lost}) on {backend} -> {Path(args.out) / 'sweep.db'}", flush=True)
+    if s.not_ok_total:
+        what = (f"{s.not_ok_total} of {s.total} combinations of the sweep are stored as failed or lost "
+                f"(first: {s.first_failure}); see the reason column of 'explore3d sweep-report {args.out}'")
+        if s.ok_total == 0:
+            raise RunError(f"every run failed: {what}; fix the inputs, then run again with --retry-failed")
+        print(f"{PROG}: warning: {' '.join(what.split())}", file=sys.stderr)
     return 0
 
 

@@ -301,6 +301,15 @@ def _init_worker(spec, vertices, faces, sim_config, setup=None):
     _WORKER["world_args"] = (spec, vertices, faces, sim_config, setup)
 
 
+def _init_pool_worker(*args):
+    """A wrap pool's worker: dies with the process that runs the exploration, then as
+    :func:`_init_worker`."""
+    from ._lifeline import die_with_parent
+
+    die_with_parent()
+    _init_worker(*args)
+
+
 class AngleRecorder(ForwardingRobot):
     """Keeps the measured joint angles (n,) of every reading, per motion (a list of lists)."""
 
@@ -401,7 +410,7 @@ class _WrapRunner:
             import multiprocessing as mp
 
             ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-            self.pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=_init_worker,
+            self.pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=_init_pool_worker,
                                             initargs=self.args)
         return self
 

@@ -16,9 +16,22 @@ Rows go into an SQLite database ``sweep.db`` in the output folder (WAL, one comm
 only writer is the sweep's own process), after the run's files (``runs/<key>/estimate.stl``,
 ``points.ply``, ``report.json``; planar runs also ``estimate_polygon.json``) and the true mesh
 (``truths/<hash>.stl``, once per object and size) are written atomically, so a stored row always has its files.  A
-sweep started again with the same command runs only the combinations without a row.  A run that
-fails (an exception, or a worker that dies: PyBullet can crash the process) is stored as a
-failure with a one-line reason; the sweep goes on.
+sweep started again with the same command runs only the combinations without a row (and those
+stored as ``lost``, below).  A run that fails (an exception, or a worker that crashes: PyBullet can
+kill the process by SIGSEGV) is stored with status ``failed`` and a one-line reason; the sweep
+goes on.  A run lost to the machinery rather than to itself (a worker that exits without a
+result, or is killed from outside: SIGKILL, SIGTERM, SIGINT, SIGHUP; a Ray node that died) is
+stored with status ``lost``: a plain rerun runs it again.
+
+One sweep at a time per folder: :func:`run_sweep` holds an exclusive ``flock`` on
+``sweep.lock`` in the folder (holder's pid inside) while it runs; the kernel releases it when the
+holder dies (SIGKILL too).  A second sweep on the folder raises :class:`SweepBusyError` before
+doing anything.  The local backend's workers die with the sweep (Linux: ``PR_SET_PDEATHSIG``,
+elsewhere a thread that watches the parent's pid).
+
+A ``sweep.db`` that is not a sweep's database (not SQLite, another schema, damaged) is refused
+with :class:`SweepDatabaseError` and left as it is; readers (:func:`read_rows`) open it
+read-only.
 
 Backends run the same function (:func:`execute`) on the same tasks, so the stored rows do not
 depend on the backend or the number of workers (only the timing columns, :data:`TIMING_COLUMNS`,
@@ -34,12 +47,14 @@ do):
 Each run gets ``jobs_per_run`` processes for its wraps (``ExploreConfig.jobs``; results do not
 depend on it).
 
-Test hook: the environment variable ``EXPLORE3D_SWEEP_FAULT`` = ``"segfault:OBJECT"`` or
-``"raise:OBJECT"`` (several separated by ``;``) makes the runs of that object (as stored) die by
-SIGSEGV or raise, in the worker.
+Test hook: the environment variable ``EXPLORE3D_SWEEP_FAULT`` = ``"segfault:OBJECT"``,
+``"raise:OBJECT"``, ``"exit:OBJECT"`` or ``"hang:OBJECT"`` (several separated by ``;``) makes the
+runs of that object (as stored) die by SIGSEGV, raise, exit with code 0 without a result, or
+sleep for an hour, in the worker.
 """
 from __future__ import annotations
 
+import contextlib
 import glob
 import hashlib
 import json
@@ -50,11 +65,24 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["SWEEP_KEYS", "TIMING_COLUMNS", "RunTask", "SweepStore", "SweepSummary", "execute", "parse_grid",
-           "read_grid_file", "resolve_objects", "run_sweep", "settings_grid", "sweep_tasks"]
+__all__ = ["SWEEP_KEYS", "TIMING_COLUMNS", "RunTask", "SweepBusyError", "SweepDatabaseError", "SweepStore",
+           "SweepSummary", "execute", "parse_grid", "read_grid_file", "read_rows", "resolve_objects", "run_sweep",
+           "settings_grid", "sweep_tasks"]
 
 #: Name of the database in a sweep's output folder.
 DB_NAME = "sweep.db"
+
+#: Name of the lock file in a sweep's output folder (see :func:`sweep_lock`).
+LOCK_NAME = "sweep.lock"
+
+#: Status of a run lost to the machinery (its worker exited without a result or was killed from
+#: outside): stored so the report shows it, run again by a plain rerun.
+LOST = "lost"
+
+#: Signals that end a worker from outside (the user, a supervisor, the OOM killer): the run is
+#: ``lost``, not ``failed``.  Any other signal (SIGSEGV, SIGABRT, SIGBUS, SIGFPE, ...) is the run's
+#: own crash.
+_EXTERNAL_SIGNALS = ("SIGKILL", "SIGTERM", "SIGINT", "SIGHUP")
 
 #: Columns of a stored row that are wall-clock times (everything else is the same whichever
 #: backend and however many workers ran it).
@@ -364,6 +392,10 @@ def _fault_hook(task: RunTask) -> None:
             os.kill(os.getpid(), signal.SIGSEGV)
         elif what == "raise":
             raise RuntimeError(f"injected failure (EXPLORE3D_SWEEP_FAULT={spec})")
+        elif what == "exit":
+            os._exit(0)
+        elif what == "hang":
+            time.sleep(3600.0)
 
 
 def execute(task: RunTask, vertices, faces, arm=None) -> dict:
@@ -407,20 +439,85 @@ def execute(task: RunTask, vertices, faces, arm=None) -> dict:
 
 # --- storage --------------------------------------------------------------------------------------
 
+class SweepDatabaseError(ValueError):
+    """A ``sweep.db`` that cannot be used: not SQLite, another schema, damaged, or not readable
+    or writable here.  The message is one line naming the file, what is wrong and the fix."""
+
+
+class SweepBusyError(ValueError):
+    """Another sweep holds the folder's lock (:func:`sweep_lock`); the message names the folder,
+    the holder's pid and the fix."""
+
+
+def _is_unopenable(exc: sqlite3.Error) -> bool:
+    """An error of opening (permissions, a missing or read-only folder), not of the file's bytes."""
+    text = str(exc).lower()
+    return any(w in text for w in ("unable to open", "readonly", "read-only", "permission"))
+
+
+def _check_database(db: sqlite3.Connection, path: Path, fix: str, deep: bool = True) -> bool:
+    """Raise :class:`SweepDatabaseError` unless ``db`` is a sound sweep database; False when it
+    has no table at all (a new, empty file), True for a sweep's database.  Reads only: the schema,
+    and (``deep``) the whole file, by ``PRAGMA quick_check``.  An error of opening (permissions)
+    is raised as it is."""
+    try:
+        tables = sorted(r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'"))
+        if not tables:
+            return False
+        problem = None
+        if "runs" not in tables:
+            problem = f"it has no runs table; its tables: {', '.join(tables)}"
+        else:
+            columns = {r[1] for r in db.execute("PRAGMA table_info(runs)")}
+            missing = [c for c in _COLUMNS if c not in columns]
+            if missing:
+                problem = f"its runs table lacks the columns {', '.join(missing)}"
+            elif deep:
+                found = [r[0] for r in db.execute("PRAGMA quick_check(1)")]
+                if found != ["ok"]:
+                    problem = f"damaged: {found[0] if found else 'quick_check found nothing'}"
+    except sqlite3.DatabaseError as exc:
+        if isinstance(exc, sqlite3.OperationalError) and _is_unopenable(exc):
+            raise
+        problem = str(exc) or type(exc).__name__
+    if problem is not None:
+        raise SweepDatabaseError(f"{path} is not an explore3d sweep database ({' '.join(problem.split())}); {fix}")
+    return True
+
+
 class SweepStore:
     """The rows of a sweep in ``folder/sweep.db`` (SQLite, WAL, one commit per row).
 
-    Only the sweep's own process writes; :meth:`put` replaces a row with the same key."""
+    Only the sweep's own process writes (:func:`run_sweep` holds the folder's lock); :meth:`put`
+    replaces a row with the same key.  An existing ``sweep.db`` is checked before anything is
+    written to it (:class:`SweepDatabaseError`, the file left as it is); so is a folder or file
+    that cannot be written."""
 
-    def __init__(self, folder):
+    def __init__(self, folder, deep_check: bool = True):
+        """``deep_check``: read the whole existing file to find damage (PRAGMA quick_check),
+        not only its schema (:func:`run_sweep` has done it before taking the lock)."""
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.path = self.folder / DB_NAME
-        self.db = sqlite3.connect(self.path, timeout=30.0)
-        self.db.execute("PRAGMA journal_mode=WAL")
-        self.db.execute("PRAGMA synchronous=FULL")
-        self.db.execute(SCHEMA)
-        self.db.commit()
+        fix = "move it away or choose another --out"
+        try:
+            self.db = sqlite3.connect(self.path, timeout=30.0)
+        except sqlite3.Error as exc:
+            raise SweepDatabaseError(f"cannot open {self.path} ({exc}); choose a writable --out") from None
+        try:
+            _check_database(self.db, self.path, fix, deep_check)
+            self.db.execute("PRAGMA journal_mode=WAL")
+            self.db.execute("PRAGMA synchronous=FULL")
+            self.db.execute(SCHEMA)
+            self.db.commit()
+        except SweepDatabaseError:
+            self.db.close()
+            raise
+        except sqlite3.Error as exc:
+            self.db.close()
+            if _is_unopenable(exc):
+                raise SweepDatabaseError(f"cannot write {self.path} ({exc}); choose a writable --out") from None
+            raise SweepDatabaseError(f"{self.path} is not an explore3d sweep database ({exc}); {fix}") from None
 
     def close(self) -> None:
         self.db.close()
@@ -435,27 +532,83 @@ class SweepStore:
         """key -> status of every stored row."""
         return dict(self.db.execute("SELECT key, status FROM runs"))
 
+    def outcomes(self) -> dict:
+        """key -> (status, reason, object) of every stored row."""
+        return {k: (st, r, o) for k, st, r, o in self.db.execute("SELECT key, status, reason, object FROM runs")}
+
     def put(self, row: dict) -> None:
         missing = set(_COLUMNS) - set(row)
         if missing:
             raise ValueError(f"a sweep row needs {sorted(missing)}")
-        self.db.execute(f"INSERT OR REPLACE INTO runs ({', '.join(_COLUMNS)}) VALUES ({', '.join('?' * len(_COLUMNS))})",
-                        [row[c] for c in _COLUMNS])
-        self.db.commit()
+        try:
+            self.db.execute(f"INSERT OR REPLACE INTO runs ({', '.join(_COLUMNS)}) "
+                            f"VALUES ({', '.join('?' * len(_COLUMNS))})", [row[c] for c in _COLUMNS])
+            self.db.commit()
+        except sqlite3.Error as exc:
+            raise SweepDatabaseError(f"cannot store a row in {self.path} ({exc}); free the disk or fix the folder's "
+                                     "permissions, then run the same command again (stored rows are kept)") from None
 
     def rows(self) -> list[dict]:
         """Every row as a dict of :data:`_COLUMNS`, ordered by object, then settings, then seed."""
-        cur = self.db.execute(f"SELECT {', '.join(_COLUMNS)} FROM runs ORDER BY object, settings, seed, version")
-        return [dict(zip(_COLUMNS, r)) for r in cur]
+        return _select_rows(self.db)
+
+
+def _select_rows(db) -> list[dict]:
+    cur = db.execute(f"SELECT {', '.join(_COLUMNS)} FROM runs ORDER BY object, settings, seed, version")
+    return [dict(zip(_COLUMNS, r)) for r in cur]
+
+
+def _connect_read_only(path: Path, fix: str, deep: bool = True) -> tuple[sqlite3.Connection, bool]:
+    """``path`` opened read-only, never for writing, and checked (:func:`_check_database`:
+    whether it has tables).  Without a ``-wal`` file beside it (no sweep is writing it; a sweep's
+    last close folds the log into the file) the file holds every row and is opened ``immutable``:
+    nothing is created beside it, so this works in a read-only folder.  With one, ``mode=ro``:
+    SQLite reads the log through its ``-shm`` index, which it may need to create.  Raises
+    :class:`SweepDatabaseError`."""
+    uri = path.resolve().as_uri()
+    wal = path.with_name(path.name + "-wal")
+    live = wal.is_file() and wal.stat().st_size > 0  # an empty log (left by a reader) holds no rows
+    db = None
+    try:
+        db = sqlite3.connect(f"{uri}?mode=ro" if live else f"{uri}?mode=ro&immutable=1", uri=True, timeout=30.0)
+        return db, _check_database(db, path, fix, deep)
+    except sqlite3.Error as exc:
+        if db is not None:
+            db.close()
+        if not _is_unopenable(exc):
+            raise SweepDatabaseError(f"{path} is not an explore3d sweep database ({exc}); {fix}") from None
+        if live:
+            raise SweepDatabaseError(f"cannot read {path} read-only ({exc}): its write-ahead log {wal.name} holds rows "
+                                     "that need its -shm index, which cannot be created here; run the command as a "
+                                     "user who can write the folder, or wait for the sweep to finish") from None
+        raise SweepDatabaseError(f"cannot read {path} ({exc}); check the file's permissions") from None
+    except BaseException:
+        if db is not None:
+            db.close()
+        raise
 
 
 def read_rows(folder) -> list[dict]:
-    """The rows of the sweep in ``folder`` (ValueError if it holds no sweep.db)."""
-    path = Path(folder) / DB_NAME
+    """The rows of the sweep in ``folder``, read without writing anything (read-only open).
+    Raises ValueError if it holds no sweep.db, :class:`SweepDatabaseError` if that is not a
+    sweep's database (or an empty file: no sweep yet)."""
+    folder = Path(folder)
+    path = folder / DB_NAME
     if not path.is_file():
         raise ValueError(f"{folder} holds no {DB_NAME}; pass the --out folder of an 'explore3d sweep'")
-    with SweepStore(folder) as store:
-        return store.rows()
+    if not os.access(path, os.R_OK):
+        raise SweepDatabaseError(f"cannot read {path} (permission denied); check the file's permissions")
+    fix = "move it away, or pass the --out folder of an 'explore3d sweep'"
+    db, has_tables = _connect_read_only(path, fix)
+    try:
+        if not has_tables:
+            raise SweepDatabaseError(f"{path} is not an explore3d sweep database (it has no table); {fix}")
+        try:
+            return _select_rows(db)
+        except sqlite3.DatabaseError as exc:
+            raise SweepDatabaseError(f"{path} is not an explore3d sweep database ({exc}); {fix}") from None
+    finally:
+        db.close()
 
 
 def _row(task: RunTask, outcome: dict, truth: str | None) -> dict:
@@ -482,17 +635,23 @@ def _row(task: RunTask, outcome: dict, truth: str | None) -> dict:
 
 # --- backends -------------------------------------------------------------------------------------
 
-def _child_main(task, vertices, faces, arm, result_path) -> None:
-    """A local worker process: run one task, leave its outcome (pickle) at ``result_path``."""
+def _child_main(task, vertices, faces, arm, result_path, parent_pid) -> None:
+    """A local worker process: run one task, leave its outcome (pickle) at ``result_path``; it dies
+    with the sweep's process ``parent_pid`` (:func:`explore3d._lifeline.die_with_parent`)."""
     import pickle
 
+    from ._lifeline import die_with_parent
     from .io import atomic_write_bytes
 
+    die_with_parent(parent_pid)
     outcome = execute(task, vertices, faces, arm)
     atomic_write_bytes(result_path, pickle.dumps(outcome, protocol=pickle.HIGHEST_PROTOCOL))
 
 
-def _exit_reason(code) -> str:
+def _exit_outcome(code) -> dict:
+    """The outcome of a worker that ended with exit code ``code`` and left no result: ``failed``
+    when it crashed by itself (a signal such as SIGSEGV), :data:`LOST` when it was killed from
+    outside (:data:`_EXTERNAL_SIGNALS`) or exited without a result."""
     import signal
 
     if code is not None and code < 0:
@@ -500,8 +659,13 @@ def _exit_reason(code) -> str:
             name = signal.Signals(-code).name
         except ValueError:
             name = f"signal {-code}"
-        return f"worker crashed: killed by {name} (PyBullet or a native library failed in the run)"
-    return f"worker exited with code {code} without a result"
+        if name in _EXTERNAL_SIGNALS:
+            return {"status": LOST, "reason": f"worker killed by {name} from outside the run (a plain rerun runs "
+                                              "it again)", "time_s": math.nan}
+        return {"status": "failed", "reason": f"worker crashed: killed by {name} (PyBullet or a native library "
+                                              "failed in the run)", "time_s": math.nan}
+    return {"status": LOST, "reason": f"worker exited with code {code} without a result (a plain rerun runs it "
+                                      "again)", "time_s": math.nan}
 
 
 def _local_backend(jobs, workers: int, work_dir: Path, on_start):
@@ -522,7 +686,8 @@ def _local_backend(jobs, workers: int, work_dir: Path, on_start):
                 task, (V, F), arm = pending.popleft()
                 path = work_dir / f"{task.key}.pkl"
                 path.unlink(missing_ok=True)
-                p = ctx.Process(target=_child_main, args=(task, V, F, arm, path), name=f"explore3d-sweep-{task.key}")
+                p = ctx.Process(target=_child_main, args=(task, V, F, arm, path, os.getpid()),
+                                name=f"explore3d-sweep-{task.key}")
                 p.start()
                 running[p.sentinel] = (p, task, path)
                 on_start(task)
@@ -533,7 +698,7 @@ def _local_backend(jobs, workers: int, work_dir: Path, on_start):
                     outcome = pickle.loads(path.read_bytes())
                     path.unlink()
                 else:
-                    outcome = {"status": "failed", "reason": _exit_reason(p.exitcode), "time_s": math.nan}
+                    outcome = _exit_outcome(p.exitcode)
                 yield task, outcome
     finally:
         for p, _, path in running.values():  # interrupted: end the processes this sweep started
@@ -580,8 +745,11 @@ def _ray_backend(jobs, workers: int, jobs_per_run: int, address, on_start):
                 outcome = ray.get(ref)
             except ray.exceptions.RayError as exc:  # the worker died (a crash in PyBullet) or Ray failed
                 first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-                outcome = {"status": "failed", "reason": " ".join(f"worker crashed: {type(exc).__name__}: {first}"
-                                                                  .split())[:400], "time_s": math.nan}
+                crashed = isinstance(exc, (ray.exceptions.WorkerCrashedError, ray.exceptions.RayTaskError))
+                what = "worker crashed" if crashed else "lost to Ray (a plain rerun runs it again)"
+                outcome = {"status": "failed" if crashed else LOST,
+                           "reason": " ".join(f"{what}: {type(exc).__name__}: {first}".split())[:400],
+                           "time_s": math.nan}
             yield task, outcome
     finally:
         if started:
@@ -593,14 +761,72 @@ def _ray_backend(jobs, workers: int, jobs_per_run: int, address, on_start):
 @dataclass(frozen=True)
 class SweepSummary:
     """What :func:`run_sweep` did: ``total`` combinations, ``stored_before`` (skipped),
-    ``ran``, ``ok`` and ``failed`` (of those run), the ``folder``."""
+    ``ran``, ``ok``, ``failed`` and ``lost`` (of those run: ``ran = ok + failed + lost``), the
+    ``folder``; ``ok_total``: combinations of the sweep stored as ok after it (those stored before
+    included); ``first_failure``: ``"object: reason"`` of the first combination not ok (None when
+    all are)."""
 
     total: int
     stored_before: int
     ran: int
     ok: int
     failed: int
+    lost: int
     folder: str
+    ok_total: int
+    first_failure: str | None = None
+
+    @property
+    def not_ok_total(self) -> int:
+        """Combinations of the sweep stored as failed or lost."""
+        return self.total - self.ok_total
+
+
+@contextlib.contextmanager
+def sweep_lock(folder):
+    """Hold the exclusive lock of the sweep folder ``folder`` (created): ``flock(LOCK_EX |
+    LOCK_NB)`` on ``folder/sweep.lock``, which then holds this process's pid.  The kernel releases
+    the lock when the holder ends, SIGKILL included.  Raises :class:`SweepBusyError` at once when
+    another process holds it (without fcntl, i.e. not on a POSIX system: no lock)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield None
+        return
+    path = folder / LOCK_NAME
+    fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "unknown"
+            raise SweepBusyError(f"another sweep (pid {holder}) is running on {folder}; wait for it to end, or choose "
+                                 "another --out") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+        try:
+            yield path
+        finally:
+            os.ftruncate(fd, 0)
+    finally:
+        os.close(fd)  # releases the lock
+
+
+#: Reason with which earlier versions stored a worker that exited without a result as failed:
+#: such rows are lost runs, run again by a plain rerun.
+_LEGACY_LOST_REASON = "worker exited with code "
+
+
+def _to_run(outcome, retry_failed: bool) -> bool:
+    """Whether a combination stored with ``outcome`` ((status, reason, object) or None) runs."""
+    if outcome is None:
+        return True
+    status, reason = outcome[0], outcome[1] or ""
+    if status == "ok":
+        return False
+    return retry_failed or status == LOST or reason.startswith(_LEGACY_LOST_REASON)
 
 
 def _write_truth(folder: Path, task: RunTask, mesh) -> str:
@@ -627,8 +853,13 @@ def run_sweep(objects, out, grid: dict | None = None, *, size: float | None = No
         workers: runs at once (local processes, or the local Ray's CPUs / ``jobs_per_run``).
         jobs_per_run: processes per run (its wraps).
         backend: "local" or "ray".  ray_address: an existing Ray cluster (default: ``RAY_ADDRESS``).
-        retry_failed: run the combinations stored as failures again.
+        retry_failed: run the combinations stored as failures again (those stored as ``lost``
+            always run again).
         progress: a tqdm bar on stderr.
+
+    Raises :class:`SweepBusyError` when another sweep runs on ``out`` (nothing done),
+    :class:`SweepDatabaseError` when ``out/sweep.db`` is not a sweep's database (left as it is),
+    OSError when ``out`` cannot be written.
     """
     from .objects import load_object
 
@@ -639,9 +870,14 @@ def run_sweep(objects, out, grid: dict | None = None, *, size: float | None = No
             raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
     folder = Path(out)
     tasks = sweep_tasks(objects, grid, size=size, jobs_per_run=jobs_per_run)
-    with SweepStore(folder) as store:
-        done = store.statuses()
-        todo = [t for t in tasks if t.key not in done or (retry_failed and done[t.key] != "ok")]
+    path = folder / DB_NAME
+    if path.is_file() and path.stat().st_size > 0 and os.access(path, os.R_OK):
+        # not a sweep's database (not SQLite, another schema, damaged): refused before anything
+        # (the lock file too) is written beside it
+        _connect_read_only(path, "move it away or choose another --out")[0].close()
+    with sweep_lock(folder), SweepStore(folder, deep_check=False) as store:
+        done = store.outcomes()
+        todo = [t for t in tasks if _to_run(done.get(t.key), retry_failed)]
         stored_before = len(tasks) - len(todo)
         bar = None
         if progress:
@@ -682,10 +918,10 @@ def run_sweep(objects, out, grid: dict | None = None, *, size: float | None = No
 
                 arms[arm_name] = load_arm(arm_name)
             jobs.append((t, mesh, arms[arm_name]))
-        n_ok = n_failed = 0
+        n_ok = n_failed = n_lost = 0
 
         def store_one(task, outcome):
-            nonlocal n_ok, n_failed
+            nonlocal n_ok, n_failed, n_lost
             truth = meshes[(task.object, task.size)][1] if outcome["status"] == "ok" else None
             if outcome["status"] == "ok":
                 from .io import atomic_write_bytes, json_text
@@ -695,6 +931,8 @@ def run_sweep(objects, out, grid: dict | None = None, *, size: float | None = No
                     atomic_write_bytes(run_dir / name, data)
                 atomic_write_bytes(run_dir / "report.json", json_text(outcome["report"]).encode("utf-8"))
                 n_ok += 1
+            elif outcome["status"] == LOST:
+                n_lost += 1
             else:
                 n_failed += 1
             store.put(_row(task, outcome, truth))
@@ -717,5 +955,9 @@ def run_sweep(objects, out, grid: dict | None = None, *, size: float | None = No
                 bar.close()
             if (folder / ".work").is_dir() and not any((folder / ".work").iterdir()):
                 (folder / ".work").rmdir()
-    return SweepSummary(total=len(tasks), stored_before=stored_before, ran=n_ok + n_failed, ok=n_ok,
-                        failed=n_failed, folder=str(folder))
+        after = store.outcomes()
+    stored = [after.get(t.key) for t in tasks]
+    first = next((f"{Path(o[2]).name}: {o[1]}" for o in stored if o is not None and o[0] != "ok"), None)
+    return SweepSummary(total=len(tasks), stored_before=stored_before, ran=n_ok + n_failed + n_lost, ok=n_ok,
+                        failed=n_failed, lost=n_lost, folder=str(folder),
+                        ok_total=sum(o is not None and o[0] == "ok" for o in stored), first_failure=first)

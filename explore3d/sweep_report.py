@@ -229,7 +229,13 @@ def _html(rows, header, table, thumbs: dict, plot_name: str) -> str:
 
 def write_sweep_report(folder, out=None, thumbnails: bool = True) -> list[Path]:
     """Write the report of the sweep in ``folder`` into ``out`` (default ``folder/report``);
-    returns the paths written (report.md first).  Raises ValueError for a folder without a sweep."""
+    returns the paths written (report.md first).  ``folder`` is only read (its database opened
+    read-only, :func:`explore3d.sweep.read_rows`).  Raises ValueError (one line) for a folder
+    without a sweep, a ``sweep.db`` that is not a sweep's, or an ``out`` that cannot be written
+    (checked before anything is written)."""
+    import os
+    import tempfile
+
     from .io import atomic_write_text
     from .sweep import read_rows
 
@@ -238,7 +244,14 @@ def write_sweep_report(folder, out=None, thumbnails: bool = True) -> list[Path]:
     if not rows:
         raise ValueError(f"the sweep in {folder} has no stored runs yet; run 'explore3d sweep ... --out {folder}'")
     out = folder / "report" if out is None else Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".write-test.", dir=out)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise ValueError(f"cannot write the report into {out} ({exc.strerror or exc}); pass --out a writable "
+                         "folder") from None
     header, table = report_table(rows)
     files = [atomic_write_text(out / "report.md", _markdown(rows, header, table)),
              atomic_write_text(out / "report.csv", _csv(header, table)),
