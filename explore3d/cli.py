@@ -161,6 +161,9 @@ RUN_OPTIONS = {
     "a": _coarseness("--a"),
     "method": _choice("method", METHODS),
     "seed": _int_any("--seed"),
+    # the seed of the simulated sensors' noise (explore3d.sensing.SensorConfig.seed): one run is one
+    # sample of the contact dynamics; figures are medians over these
+    "noise_seed": _int_any("--noise-seed"),
     "jobs": _int_min("--jobs"),
     "format": _choice("format", MESH_FORMATS),
     "scale": _positive("--scale"),
@@ -268,6 +271,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--a", type=RUN_OPTIONS["a"], help=f"inverse-hull coarseness in (0, {MAX_A:g}] (default {DEFAULT_A}, as explore3d.run)")
     r.add_argument("--method", type=RUN_OPTIONS["method"], help="exponential (default) or spherical")
     r.add_argument("--seed", type=RUN_OPTIONS["seed"], help="seed of the error-measure surface samples (default 0)")
+    r.add_argument("--noise-seed", dest="noise_seed", type=RUN_OPTIONS["noise_seed"],
+                   help="seed of the simulated sensors' noise (default 0; each wrap draws from (seed, wrap index))")
     r.add_argument("--jobs", type=RUN_OPTIONS["jobs"], help="worker processes >= 1 (default: all cores; results do not depend on it)")
     r.add_argument("--config", help="TOML file with the same option names (object, out, arm, mode, ...)")
     r.add_argument("--format", type=RUN_OPTIONS["format"], help=f"estimate mesh format: {', '.join(MESH_FORMATS)} (default obj)")
@@ -501,6 +506,10 @@ def explore_config(opts: dict):
     try:
         if opts.get("sensing") == "ideal":
             kw["sensors"] = SensorConfig.ideal()
+        if opts.get("noise_seed") is not None:
+            import dataclasses
+
+            kw["sensors"] = dataclasses.replace(kw.get("sensors", SensorConfig()), seed=opts["noise_seed"])
         if opts.get("collision_margin") is not None:
             kw["sim"] = SimConfig(collision_margin=opts["collision_margin"])
         if opts.get("probes") is not None or opts.get("fingers") is not None:

@@ -93,8 +93,8 @@ _REPORT_TIMING_KEYS = ("timings", "wall_s")
 
 #: Settings a grid may sweep, each an option of ``explore3d run`` (see ``explore3d run --help``).
 SWEEP_KEYS = ("a", "angles", "arm", "attempts", "base_step", "clearance", "collision_margin", "directions",
-              "encircle", "face_offset", "fingers", "method", "mirrored", "mode", "n_along", "n_height", "offsets", "points", "probes",
-              "scene", "seed", "sensing", "size")
+              "encircle", "face_offset", "fingers", "method", "mirrored", "mode", "n_along", "n_height", "noise_seed", "offsets",
+              "points", "probes", "scene", "seed", "sensing", "size")
 
 #: Settings left out of the canonical settings when they have these values (what ``run`` does
 #: without them), so ``--grid a=0.05`` and no ``a`` at all are the same combination.
