@@ -7,7 +7,10 @@ The parser produces the same dataclasses the Python API takes (:class:`ExploreCo
 * 1: a failed run (missing/unreadable/empty/non-mesh/open input file, no contacts, unwritable
   output); a one-line ``explore3d: error: ...`` on stderr;
 * 2: a usage error (unknown option or value, non-numeric, out of range, unknown object, arm or
-  format, bad TOML config); the same one-line form.
+  format, bad TOML config); the same one-line form;
+* 130: interrupted (Ctrl-C, SIGINT, at any moment): ``explore3d: error: interrupted``, no
+  traceback from the command or its worker processes; ``run`` leaves its output folder as it was
+  (:func:`explore3d.pipeline.run_and_report`: all or nothing).
 
 Heavy modules (numpy, trimesh, pybullet, matplotlib) are imported inside the commands, so
 ``explore3d --help`` is instant.
