@@ -1,4 +1,4 @@
-"""``python -m explore3d``: the command line (see :mod:`explore3d.cli`)."""
+"""``python -m explore3d`` and the ``explore3d`` program: the command line (see :mod:`explore3d.cli`)."""
 import os
 import signal
 import sys
@@ -12,16 +12,24 @@ def _interrupted_early(signum, frame):
     os._exit(130)
 
 
-signal.signal(signal.SIGINT, _interrupted_early)
+def entry() -> None:
+    """Run :func:`explore3d.cli.main` as the program and exit with its code.  An interrupt while the
+    command line imports prints the one line; after an interrupted run (130: main has cleaned up
+    and said so) it leaves by ``os._exit``, skipping the interpreter's teardown, where objects the
+    interrupt left half-made could still print or the interpreter re-kill itself with SIGINT."""
+    signal.signal(signal.SIGINT, _interrupted_early)
+    from .cli import main
 
-from .cli import main  # noqa: E402 -- after the handler: an interrupt while importing prints one line
+    code = main()
+    if code == 130:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(130)
+    sys.exit(code)
 
-code = main()
-if code == 130:  # interrupted: main has cleaned up and said so; skip the interpreter's teardown, where
-    for stream in (sys.stdout, sys.stderr):  # objects the interrupt left half-made could still speak
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
-    os._exit(130)
-sys.exit(code)
+
+if __name__ == "__main__":
+    entry()
