@@ -930,37 +930,40 @@ def _quiet_interrupt_unraisable(hook):
 def _interrupt_handling():
     """For the length of ``main``: SIGINT raises KeyboardInterrupt once and is ignored afterwards
     (:func:`explore3d._interrupt.sigint_handler`), and an interrupt swallowed in a ``__del__`` prints
-    nothing.  Only in the main thread; the previous handler and hook are restored."""
+    nothing.  Only in the main thread; the previous handler and hook are restored, and the flag is
+    cleared (library calls after ``main`` in the same process are not taken for interrupted); the
+    yielded dict's ``"interrupted"`` says whether a SIGINT came."""
     import signal
     import threading
 
     from ._interrupt import INTERRUPTED, sigint_handler
 
     INTERRUPTED[0] = False
+    state = {"interrupted": False}
     old_hook = sys.unraisablehook
     sys.unraisablehook = _quiet_interrupt_unraisable(old_hook)
     old = None
     if threading.current_thread() is threading.main_thread():
         old = signal.signal(signal.SIGINT, sigint_handler)
     try:
-        yield
+        yield state
     finally:
         if old is not None:
             signal.signal(signal.SIGINT, old)
         sys.unraisablehook = old_hook
+        state["interrupted"], INTERRUPTED[0] = INTERRUPTED[0], False
 
 
 def main(argv=None) -> int:
     """Run the command line ``argv`` (default ``sys.argv[1:]``); returns the exit code.  Ctrl-C
     (SIGINT) at any moment: exit 130 and the one line ``explore3d: error: interrupted``."""
-    from ._interrupt import INTERRUPTED
-
+    state = {"interrupted": False}
     try:
-        with _interrupt_handling():
+        with _interrupt_handling() as state:
             code = _main(argv)
     except KeyboardInterrupt:  # arrived between the handler's installation and _main's own handling
         code = None
-    if code is None or (INTERRUPTED[0] and code != 130):  # also an interrupt some code swallowed
+    if code is None or (state["interrupted"] and code != 130):  # also an interrupt some code swallowed
         _say("interrupted")
         code = 130
     return code

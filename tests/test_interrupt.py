@@ -294,3 +294,21 @@ def test_a_switch_killed_at_any_step_is_finished_by_the_next_run(tmp_path, monke
     cleaned = io.stale_leftovers(out, RUN_FILES)
     assert cleaned == [stage.name]
     assert {p.name: p.read_text() for p in out.iterdir()} == new
+
+
+def test_main_clears_its_interrupt_flag(monkeypatch):
+    """An interrupted in-process ``main`` (Ctrl-C in a notebook) leaves no flag behind: library calls
+    afterwards are not taken for interrupted (check_interrupt passes)."""
+    from explore3d import cli
+    from explore3d._interrupt import INTERRUPTED, check_interrupt
+
+    def interrupted(args):
+        os.kill(os.getpid(), signal.SIGINT)  # through the command line's handler, as a real Ctrl-C
+        time.sleep(5)
+        return 0
+
+    monkeypatch.setattr(cli, "cmd_objects", interrupted)  # build_parser binds the command at call time
+    assert cli.main(["objects"]) == 130
+    assert INTERRUPTED[0] is False
+    check_interrupt()
+
