@@ -7,7 +7,10 @@ The parser produces the same dataclasses the Python API takes (:class:`ExploreCo
 * 1: a failed run (missing/unreadable/empty/non-mesh/open input file, no contacts, unwritable
   output); a one-line ``explore3d: error: ...`` on stderr;
 * 2: a usage error (unknown option or value, non-numeric, out of range, unknown object, arm or
-  format, bad TOML config); the same one-line form.
+  format, bad TOML config); the same one-line form;
+* 130: interrupted (Ctrl-C, SIGINT, at any moment): ``explore3d: error: interrupted``, no
+  traceback from the command or its worker processes; ``run`` leaves its output folder as it was
+  (:func:`explore3d.pipeline.run_and_report`: all or nothing).
 
 Heavy modules (numpy, trimesh, pybullet, matplotlib) are imported inside the commands, so
 ``explore3d --help`` is instant.
@@ -15,6 +18,7 @@ Heavy modules (numpy, trimesh, pybullet, matplotlib) are imported inside the com
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import math
@@ -600,6 +604,9 @@ def cmd_run(args) -> int:
         from .objects import load_object
 
         mesh = load_object(opts["object"], scale=opts.get("scale"), size=opts.get("size"))
+        from ._interrupt import check_interrupt
+
+        check_interrupt()  # a Ctrl-C an import swallowed (trimesh's optional imports catch everything)
         log.info("object %s: extents %s m", opts["object"], np.round(mesh.extents, 4).tolist())
         check_run_inputs(mesh, spec, config, opts["a"], opts["method"], opts.get("centre"), opts.get("radius"))
 
@@ -962,12 +969,76 @@ def _say(msg: str) -> None:
     print(f"{PROG}: error: {one_line}", file=sys.stderr)
 
 
+def _quiet_interrupt_unraisable(hook):
+    """A ``sys.unraisablehook`` that drops the KeyboardInterrupt of a Ctrl-C that landed in a
+    ``__del__`` or a callback (the run honours it at its next check), and once interrupted every
+    such message (what the unwinding leaves half-made objects to say); the rest go to ``hook``."""
+    from ._interrupt import INTERRUPTED
+
+    def f(unraisable):
+        if INTERRUPTED[0] or isinstance(unraisable.exc_value, KeyboardInterrupt):
+            return
+        hook(unraisable)
+    return f
+
+
+@contextlib.contextmanager
+def _interrupt_handling():
+    """For the length of ``main``: SIGINT raises KeyboardInterrupt once and is ignored afterwards
+    (:func:`explore3d._interrupt.sigint_handler`), and an interrupt swallowed in a ``__del__`` prints
+    nothing.  Only in the main thread; the previous handler and hook are restored, and the flag is
+    cleared (library calls after ``main`` in the same process are not taken for interrupted); the
+    yielded dict's ``"interrupted"`` says whether a SIGINT came."""
+    import signal
+    import threading
+
+    from ._interrupt import INTERRUPTED, sigint_handler
+
+    INTERRUPTED[0] = False
+    state = {"interrupted": False}
+    old_hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_interrupt_unraisable(old_hook)
+    old = None
+    if threading.current_thread() is threading.main_thread():
+        old = signal.signal(signal.SIGINT, sigint_handler)
+    try:
+        yield state
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+        sys.unraisablehook = old_hook
+        state["interrupted"], INTERRUPTED[0] = INTERRUPTED[0], False
+
+
 def main(argv=None) -> int:
-    """Run the command line ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
+    """Run the command line ``argv`` (default ``sys.argv[1:]``); returns the exit code.  Ctrl-C
+    (SIGINT) at any moment: exit 130 and the one line ``explore3d: error: interrupted``."""
+    state = {"interrupted": False}
+    try:
+        with _interrupt_handling() as state:
+            code = _main(argv)
+    except KeyboardInterrupt:  # arrived between the handler's installation and _main's own handling
+        code = None
+    if code is None or (state["interrupted"] and code != 130):  # also an interrupt some code swallowed
+        _say("interrupted")
+        code = 130
+    return code
+
+
+def _main(argv) -> int:
+    from ._interrupt import INTERRUPTED
+
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
-        return int(args.func(args) or 0)
+        try:
+            args = parser.parse_args(argv)
+            return int(args.func(args) or 0)
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except Exception:
+            if INTERRUPTED[0]:  # what an interrupt left behind (a library that swallowed it, a half import)
+                raise KeyboardInterrupt from None
+            raise
     except SystemExit as exc:  # --help, --version
         return exc.code if isinstance(exc.code, int) else 0
     except UsageError as exc:

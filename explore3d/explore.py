@@ -8,6 +8,7 @@ resting on a table stays where a wrap left it) they run in sequence in one world
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import os
@@ -17,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ._interrupt import check_interrupt
 from ._validate import check_field
 from .active import ProbeConfig
 from .arm import ArmSpec, load_arm
@@ -301,13 +303,13 @@ def _init_worker(spec, vertices, faces, sim_config, setup=None):
     _WORKER["world_args"] = (spec, vertices, faces, sim_config, setup)
 
 
-def _init_pool_worker(*args):
-    """A wrap pool's worker: dies with the process that runs the exploration, then as
-    :func:`_init_worker`."""
-    from ._lifeline import die_with_parent
+def _init_pool_worker(parent_pid, *world_args):
+    """A pool worker's initializer: it dies with its parent and ignores SIGINT
+    (:func:`explore3d._interrupt.init_pool_worker`), then keeps the world's arguments."""
+    from ._interrupt import init_pool_worker
 
-    die_with_parent()
-    _init_worker(*args)
+    init_pool_worker(parent_pid)
+    _init_worker(*world_args)
 
 
 class AngleRecorder(ForwardingRobot):
@@ -411,18 +413,32 @@ class _WrapRunner:
 
             ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
             self.pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=_init_pool_worker,
-                                            initargs=self.args)
+                                            initargs=(os.getpid(), *self.args))
         return self
 
     def map(self, tasks):
-        return map(_run_one, tasks) if self.pool is None else self.pool.map(_run_one, tasks)
+        if self.pool is None:
+            return map(_run_one, tasks)
+        from ._interrupt import sigint_blocked
 
-    def __exit__(self, *exc):
+        with sigint_blocked():  # the workers are forked at the first submit: none may see SIGINT before
+            return self.pool.map(_run_one, tasks)  # its initializer ignores it (submits all tasks now)
+
+    def __exit__(self, exc_type, exc, tb):
         if self.pool is None:
             _WORKER.pop("world_args", None)
             _WORKER.pop("after_wrap", None)
-        else:
+        elif exc_type is None:
             self.pool.shutdown()
+        else:  # interrupted or failed: no more wraps; kill the workers rather than wait for theirs
+            self.pool.shutdown(wait=False, cancel_futures=True)
+            procs = list((getattr(self.pool, "_processes", None) or {}).values())
+            for p in procs:
+                with contextlib.suppress(OSError, ValueError, AttributeError):
+                    p.kill()
+            for p in procs:
+                with contextlib.suppress(OSError, ValueError, AttributeError, AssertionError):
+                    p.join(5.0)
 
 
 class _PersistentRunner:
@@ -552,6 +568,7 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
     def task(i, p):
         return (i, p.T_world_base, band, config, (centre, radius), floor_z)
 
+    check_interrupt()  # a Ctrl-C some import or C call swallowed: no wraps
     with runner:
         def run_poses(new_poses):
             """Run ``new_poses`` (already the last entries of ``poses``); in a persistent world one
@@ -559,6 +576,7 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
             if not persistent:
                 first = len(results)
                 for r in runner.map([task(first + j, p) for j, p in enumerate(new_poses)]):
+                    check_interrupt()
                     results.append(r)
                     moved.append(False)
                     redone.append(False)
@@ -570,6 +588,7 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
                 while True:
                     i = len(results)
                     results.append(next(iter(runner.map([task(i, p)]))))
+                    check_interrupt()
                     moved.append(_moved(spec, results, segments, config, centre, radius))
                     redone.append(redo)
                     if progress:

@@ -269,8 +269,10 @@ def _check_centre_inside(pts: np.ndarray, c: np.ndarray, diag: float) -> None:
 
 
 def _import_open3d():
+    from ._interrupt import import_optional
+
     try:
-        import open3d  # noqa: PLC0415 -- optional, heavy, needs system libusb
+        open3d = import_optional("open3d")  # optional, heavy, needs system libusb; Ctrl-C: KeyboardInterrupt
     except (ImportError, OSError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ImportError(_OPEN3D_FIX.format(err=msg)) from None

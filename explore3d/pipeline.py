@@ -510,6 +510,29 @@ class OutputConfig:
             raise ValueError(f"height must be None or a positive number of metres; got {h!r}")
 
 
+#: Every file name :func:`run_and_report` can write into its folder (report.json and what
+#: :func:`write_result` writes, any format): a run replaces or removes all of them, so a folder
+#: never mixes two runs.
+RUN_FILES = frozenset({"report.json", "points.ply", "free_space.npz", "estimate_polygon.json", "estimate.urdf",
+                       "figure.png", "views.png", "overview.png", "scene.png", "signed_distance.png",
+                       *(f"estimate.{f}" for f in ("obj", "stl", "ply", "off", "glb"))})
+
+#: Test hook (seconds): :func:`run_and_report` sleeps this long after writing the estimate files
+#: into its staging folder and before report.json and the switch, so tests can interrupt or kill a
+#: run while it writes.  Unset or empty: no pause.
+WRITE_PAUSE_ENV = "EXPLORE3D_TEST_WRITE_PAUSE_S"
+
+
+def _test_write_pause() -> None:
+    import os
+
+    v = os.environ.get(WRITE_PAUSE_ENV)
+    if v:
+        import time
+
+        time.sleep(float(v))
+
+
 def package_versions() -> dict:
     """Versions of explore3d and its main dependencies (for report.json)."""
     from importlib import metadata
@@ -552,13 +575,30 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
     Raises:
         NoContactError, ReconstructionError: as :func:`run`, after writing report.json (with an
             ``error`` entry) and points.ply (if any points) into ``out``.
+
+    All or nothing: every file is written into a hidden staging folder in ``out``
+    (:class:`~explore3d.io.StagedFolder`) and the folder is switched to the new set at the end, so
+    ``out`` never mixes two runs among :data:`RUN_FILES`:
+
+    * a completed run leaves exactly its files (an earlier run's files it does not write, e.g. the
+      pictures after ``pictures=False`` or another mesh format, are removed);
+    * a failed run (NoContactError, ReconstructionError) leaves its report.json (with ``error``)
+      and points.ply (if any points), and none of an earlier run's estimate files;
+    * an interrupted run (KeyboardInterrupt), any other exception or a kill before the switch
+      leaves ``out`` as it was (the earlier set, or no run files); the switch itself runs with
+      SIGINT/SIGTERM deferred, and a SIGKILL inside it is finished by the next run into ``out``.
+      Whenever ``out/report.json`` exists, the run files beside it are that run's complete set;
+    * the next run into ``out`` removes the staging folders and ``.*.part*`` temporaries of killed
+      runs (their pid no longer alive): :func:`explore3d.io.stale_leftovers`.
+
+    Test hook: the environment variable :data:`WRITE_PAUSE_ENV` pauses the writing.
     """
     import dataclasses
     import time
     from pathlib import Path
 
     from .arm import load_arm
-    from .io import atomic_write_text, json_text
+    from .io import StagedFolder
 
     if out is None:
         raise ValueError("run_and_report needs an output folder: pass out=")
@@ -606,10 +646,26 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
     if output.quality:  # the quality figures read the recorded trajectories
         config = dataclasses.replace(config, record=True)
         report["config"]["explore"] = config.to_dict()
+    with StagedFolder(out, RUN_FILES, last="report.json") as staged:  # discarded unless committed
+        return _run_into(staged, report, timings, t_start, mesh, spec, config, output, a, method, seed,
+                         centre, radius, progress, setup, watch)
+
+
+def _run_into(staged, report, timings, t_start, mesh, spec, config, output, a, method, seed, centre, radius,
+              progress, setup, watch):
+    """The rest of :func:`run_and_report`: run, write into ``staged.path``, then switch ``out``."""
+    import time
+
+    from ._interrupt import check_interrupt
+    from .io import atomic_write_text, json_text
+
+    stage = staged.path
 
     def finish():
         timings["total_s"] = time.perf_counter() - t_start
-        atomic_write_text(out / "report.json", json_text(report))
+        atomic_write_text(stage / "report.json", json_text(report))
+        check_interrupt()  # an interrupt swallowed somewhere: do not switch the folder
+        staged.commit()
 
     t0 = time.perf_counter()
     try:
@@ -622,7 +678,7 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
             timings["explore_s"] = float(ex.wall_s)
             report.update(exploration_summary(ex))
             if len(ex.points):
-                write_exploration_points(ex, out / "points.ply")
+                write_exploration_points(ex, stage / "points.ply")
         report["error"] = str(exc)
         finish()
         raise
@@ -647,10 +703,12 @@ def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(),
         t0 = time.perf_counter()
         report["contact_quality"] = contact_quality(res.exploration, mesh if res.setup is None else res.truth).to_dict()  # evaluation only
         timings["quality_s"] = time.perf_counter() - t0
+    check_interrupt()
     t0 = time.perf_counter()
-    files = write_result(res, mesh if res.setup is None else res.truth, out, output.fmt, pictures=output.pictures, density=output.density,
+    files = write_result(res, mesh if res.setup is None else res.truth, stage, output.fmt, pictures=output.pictures, density=output.density,
                          height=output.height)
     timings["write_s"] = time.perf_counter() - t0
+    _test_write_pause()
     report["files"] = sorted(files + ["report.json"])
     finish()
     return res, report

@@ -159,7 +159,10 @@ def _vhacd(obj_text: str) -> str:
         import pybullet
         from pybullet_utils import bullet_client
 
-        client = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
+        from ._interrupt import deferred_signals
+
+        with deferred_signals():  # a Ctrl-C inside would leave a half-made client whose __del__ complains
+            client = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
         try:
             src, dst, log = (os.path.join(d, n) for n in ("in.obj", "out.obj", "log.txt"))
             with open(src, "w") as fh:

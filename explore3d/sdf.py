@@ -73,8 +73,10 @@ class SignedDistance:
         self.centre = (V.min(0) + V.max(0)) / 2.0
         self._scene = None
         if backend in ("auto", "open3d"):
+            from ._interrupt import import_optional
+
             try:
-                import open3d as o3d  # noqa: PLC0415 -- optional, heavy
+                o3d = import_optional("open3d")  # optional, heavy; an interrupted import raises KeyboardInterrupt
             except (ImportError, OSError) as exc:
                 if backend == "open3d":
                     raise ImportError(f"open3d could not be imported ({exc}); pip install open3d-cpu, "

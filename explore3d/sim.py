@@ -148,7 +148,10 @@ class ArmSimulation:
             import pybullet
             from pybullet_utils import bullet_client
 
-            self._p = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
+            from ._interrupt import deferred_signals
+
+            with deferred_signals():  # a Ctrl-C inside would leave a half-made client whose __del__ complains
+                self._p = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
             p = self._p
             p.setGravity(*config.gravity)
             p.setTimeStep(config.timestep)

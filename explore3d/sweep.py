@@ -714,9 +714,11 @@ def _ray_execute(task, mesh, arm):
 
 def _ray_backend(jobs, workers: int, jobs_per_run: int, address, on_start):
     """Yield (task, outcome) as Ray tasks finish (see the module docstring)."""
+    from ._interrupt import import_optional
+
     try:
-        import ray
-    except ImportError as exc:
+        ray = import_optional("ray")  # an interrupted import raises KeyboardInterrupt, not "ray missing"
+    except (ImportError, OSError) as exc:
         raise ValueError(f"the Ray backend needs ray ({exc}); pip install 'explore3d[ray]', or drop --ray "
                          "(and unset RAY_ADDRESS) for local processes") from None
     started = False
