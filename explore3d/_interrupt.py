@@ -99,7 +99,7 @@ def pid_alive(pid: int) -> bool:
 
 def init_pool_worker(parent_pid: int) -> None:
     """Set up a worker process of the parent ``parent_pid``: it dies when the parent dies (at once
-    on Linux, within about a second elsewhere) and ignores SIGINT (the parent handles Ctrl-C)."""
+    on Linux, within about half a second elsewhere) and ignores SIGINT (the parent handles Ctrl-C)."""
     with contextlib.suppress(ValueError, OSError, AttributeError):  # not the main thread / no signals
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     with contextlib.suppress(ValueError, OSError, AttributeError):
