@@ -3,13 +3,13 @@ the problem, no traceback, and nothing written (issue 21).  The command line run
 (``explore3d.cli.main``); the public API raises ValueError/TypeError (or the library's own
 subclasses) with a message naming the fix.  None of these cases explores: each must be refused
 before the simulation starts."""
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
+from test_sweep_robust import _as_reader, shared_dir  # noqa: F401 (shared_dir: a fixture)
 
 from explore3d.cli import main
 
@@ -202,7 +202,8 @@ CASES = [
 
 
 @pytest.mark.parametrize("argv,code,word", CASES, ids=[" ".join(c[0])[:60] for c in CASES])
-def test_command_line_bad_input(tmp_path, capsys, argv, code, word):
+def test_command_line_bad_input(tmp_path, capsys, monkeypatch, argv, code, word):
+    _no_exploring(monkeypatch)
     got, out, err = run_cli(capsys, _argv(tmp_path, argv))
     assert got == code, err
     assert_one_line(err, word)
@@ -267,8 +268,22 @@ def _api_cases():
     ]
 
 
+def _no_exploring(monkeypatch):
+    """Make any exploration fail the test: every case must be refused before the simulation."""
+    import importlib
+
+    def explored(*args, **kwargs):
+        raise AssertionError("the bad input reached the exploration")
+
+    for name in ("explore3d.pipeline", "explore3d.explore"):  # the package's `explore` is the function
+        monkeypatch.setattr(importlib.import_module(name), "explore", explored)
+
+
 @pytest.mark.parametrize("i", range(22))
-def test_api_bad_input(i):
+def test_api_bad_input(i, monkeypatch):
+    """Each refused before any exploration (run(a=0) and run(method=...) were refused only after
+    a whole exploration, with advice to explore more)."""
+    _no_exploring(monkeypatch)
     call, kind, word = _api_cases()[i]
     with pytest.raises(kind) as info:
         call()
@@ -287,5 +302,27 @@ def test_repairs_reach_stderr_and_verbose_logging_works(tmp_path, capsys):
     assert code == 1
     assert "repaired" in err and "turned the inside-out surface outward" in err
     assert "DEBUG" in err or "INFO" in err
-    assert json.dumps  # the run was refused before exploring: no report
     assert not (tmp_path / "o" / "report.json").exists()
+
+
+def test_an_unwritable_output_file_is_named_not_its_hidden_temporary(shared_dir):
+    """``reconstruct --out RO/m.obj`` into a folder the user cannot write: one line naming RO/m.obj
+    (it named the hidden ``.m.<pid>.<random>.part.obj`` the atomic write makes), exit 1."""
+    import subprocess
+    import sys
+
+    ro = shared_dir / "ro"
+    ro.mkdir()
+    cloud = _cloud(shared_dir)
+    cloud.chmod(0o644)
+    elsewhere = shared_dir / "elsewhere"
+    elsewhere.mkdir()
+    prefix, kw, restore = _as_reader(ro, elsewhere)
+    try:
+        r = subprocess.run([*prefix, sys.executable, "-m", "explore3d", "reconstruct", str(cloud), "--out",
+                            str(ro / "m.obj")], capture_output=True, text=True, timeout=120, **kw)
+    finally:
+        restore()
+    assert r.returncode == 1, r.stderr
+    assert_one_line(r.stderr, "m.obj")
+    assert ".part" not in r.stderr and not any(ro.iterdir())

@@ -16,9 +16,30 @@ def test_readme_commands_use_a_virtual_environment():
     for cmd in (run_cmd, test_cmd):
         steps = [s.strip() for s in cmd.split("&&")]
         assert steps[0] == "apt-get update" and "python3-venv" in steps[1]
-        assert steps[2] == "python3 -m venv .venv" and steps[3] == '.venv/bin/pip install -e ".[all]"'
+        assert steps[2] == "python3 -m venv .venv"
+        assert steps[3] == '.venv/bin/pip install -c constraints.txt -e ".[all]"'  # the pinned versions
     assert run_cmd.endswith(".venv/bin/explore3d run cube --out runs/cube")
-    assert test_cmd.endswith(".venv/bin/python -m pytest -q")
+    assert test_cmd.endswith(".venv/bin/python -m pytest -q -n 2")  # both cores (pytest-xdist)
+
+
+def test_constraints_pin_every_dependency():
+    """constraints.txt gives one exact version (==) of every dependency pyproject.toml names."""
+    import re
+
+    pins = {}
+    for ln in (ROOT / "constraints.txt").read_text().splitlines():
+        if ln.strip() and not ln.startswith("#"):
+            name, _, version = ln.partition("==")
+            assert version and re.fullmatch(r"[0-9][0-9A-Za-z.+!-]*", version), ln
+            pins[re.sub(r"[-_.]+", "-", name).lower()] = version
+    text = (ROOT / "pyproject.toml").read_text()
+    deps = re.findall(r'^\s*"([A-Za-z0-9_.-]+)\s*[><=!~;\[]', text, flags=re.M)
+    assert len(deps) > 10
+    for dep in deps:
+        key = re.sub(r"[-_.]+", "-", dep).lower()
+        if key in ("explore3d", "setuptools", "wheel", "open3d", "tomli"):  # self, build-only, other platforms
+            continue
+        assert key in pins, dep
 
 
 def test_ci_runs_the_readme_test_command():

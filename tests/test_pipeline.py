@@ -26,19 +26,28 @@ def _one_line(msg: str) -> str:
     return msg
 
 
-@pytest.mark.parametrize("case", ["rough centre 1 m away", "object far too big for the arm"])
-def test_no_contact_is_real_and_named(case):
-    """The arm genuinely touches nothing: NoContactError with the wraps that were run and the fix."""
-    if case == "rough centre 1 m away":
-        mesh, kw = load_object("cube"), {"centre": (1.0, 0.0, 0.0), "radius": 0.06}
-    else:
-        mesh, kw = load_object("cube", size=3.0), {}  # the wrap starts on a 2.7 m bound; the arm reaches 0.16 m
+def test_no_contact_is_real_and_named():
+    """The arm genuinely touches nothing (the rough centre 1 m away): NoContactError with the wraps
+    that were run and the fix."""
     with pytest.raises(NoContactError) as info:
-        run(mesh, TINY, PLANAR1, **kw)
+        run(load_object("cube"), TINY, PLANAR1, centre=(1.0, 0.0, 0.0), radius=0.06)
     ex = info.value.exploration
     assert ex is not None and ex.n_contacts == 0 and ex.n_wraps == 1 and ex.steps > 0
     msg = _one_line(str(info.value))
     for fix in ("arm", "size", "centre", "radius"):
+        assert fix in msg
+
+
+def test_an_object_far_too_big_for_the_arm_is_refused_before_any_wrap(monkeypatch):
+    """A 3 m cube (rough radius 2.7 m) for an arm that reaches 0.16 m: refused up front, naming the
+    fix (it used to explore a wrap that touched nothing first)."""
+    import explore3d.pipeline
+
+    monkeypatch.setattr(explore3d.pipeline, "explore", lambda *a, **k: pytest.fail("explored"))
+    with pytest.raises(ValueError) as info:
+        run(load_object("cube", size=3.0), TINY, PLANAR1)
+    msg = _one_line(str(info.value))
+    for fix in ("arm", "size", "radius"):
         assert fix in msg
 
 
