@@ -89,6 +89,26 @@ def setup(tmp_path_factory, junk):
 
 # --- 1. one sweep at a time per folder; lost runs run again ------------------------------------
 
+def _kill_sweep_and_check_family(proc, family) -> None:
+    """SIGKILL the sweep ``proc`` only (not its process group); every process of ``family`` must
+    be gone within 5 s."""
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 5
+    while _alive(family) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _alive(family), [p.cmdline() for p in _alive(family)]
+
+
+def _reap_group(proc) -> None:
+    """Kill whatever of ``proc``'s process group is left (the test's own cleanup)."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    proc.wait()
+
+
 def test_second_sweep_on_a_busy_folder_refuses_and_the_first_loses_nothing(setup, tmp_path):
     out = tmp_path / "busy"
     argv = [sys.executable, "-m", "explore3d", "sweep", "cube", *setup["grid"], "--out", str(out), "-q"]  # one run
@@ -324,18 +344,9 @@ def test_sweep_workers_die_with_a_killed_sweep(setup, tmp_path):
         assert len(workers) == 1, "the sweep's worker did not start"
         time.sleep(1.0)  # let them import and run (one killed sooner ends at its start: its parent is gone)
         family = _alive(parent.children(recursive=True))
-        os.kill(proc.pid, signal.SIGKILL)  # the sweep only, not its process group
-        proc.wait()
-        deadline = time.monotonic() + 5
-        while _alive(family) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert not _alive(family), [p.cmdline() for p in _alive(family)]
+        _kill_sweep_and_check_family(proc, family)
     finally:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        proc.wait()
+        _reap_group(proc)
     assert main(argv) == 0  # the rerun completes the sweep
     assert {r["object"]: r["status"] for r in read_rows(out)} == {"cube": "ok", setup["junk"][0]: "failed"}
 
@@ -356,15 +367,6 @@ def test_wrap_pool_workers_die_with_a_killed_sweep(setup, tmp_path):
                     if "from multiprocessing.spawn" in " ".join(c.cmdline())]
         assert len(pool) >= 2, "the run's wrap pool did not start"
         family = _alive(parent.children(recursive=True))
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait()
-        deadline = time.monotonic() + 5
-        while _alive(family) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert not _alive(family), [p.cmdline() for p in _alive(family)]
+        _kill_sweep_and_check_family(proc, family)
     finally:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        proc.wait()
+        _reap_group(proc)
