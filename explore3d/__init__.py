@@ -2,38 +2,42 @@
 
 A blind serial arm wraps around an object again and again; contact is detected from joint
 position error alone; link surface points at contact are turned into a mesh by the inverse
-convex hull (see ``explore3d.hull``).  Units are SI everywhere (metres, radians, seconds, kg).
+convex hull (see ``explore3d.geometry.hull``).  Units are SI everywhere (metres, radians, seconds, kg).
 
 The public API::
 
     from explore3d import load_object, run, ExploreConfig, inverse_hull, shape_error
 
+The package is built in floors, each importing only from the floors below it (import-linter
+contracts in pyproject.toml): ``core`` < ``arm`` < ``geometry`` < ``robot`` < ``reconstruction``
+< ``feeling`` < ``strategy`` < ``world`` < ``app``; see docs/architecture.md.
+
 The names are imported on first use (PEP 562), so ``import explore3d`` and ``explore3d --help``
 load neither numpy nor trimesh nor pybullet.
 """
 import importlib
-import sys
-import types
 
 __version__ = "0.1.0"
 
 #: Public name -> the submodule that defines it.
 _EXPORTS = {
-    "ArmSpec": "arm", "BUILTIN_ARMS": "arm", "load_arm": "arm", "write_arm_urdf": "urdf",
-    "Exploration": "explore", "ExploreConfig": "explore", "explore": "explore", "rough_bound": "explore",
-    "InverseHull": "hull", "inverse_hull": "hull",
-    "ShapeError": "metrics", "shape_error": "metrics",
-    "BUILTIN_OBJECTS": "objects", "load_object": "objects",
-    "NoContactError": "pipeline", "ReconstructionError": "pipeline", "Result": "pipeline",
-    "reconstruct_exploration": "pipeline", "run": "pipeline", "write_result": "pipeline",
-    "ControlConfig": "encircle", "SimConfig": "sim", "SensorConfig": "sensing",
-    "Robot": "robot", "RobotLog": "robot", "RecordingRobot": "robot", "LogRobot": "robot",
-    "ContactBand": "detect", "cached_band": "band",
-    "ThicknessCalibration": "calibration", "calibrate_thickness": "calibration",
-    "ContactQuality": "quality", "contact_quality": "quality",
-    "OutputConfig": "pipeline", "run_and_report": "pipeline", "quiet_c_output": "_quiet",
-    "SceneConfig": "scene", "SceneSetup": "scene", "SceneWatch": "scene", "settle_scene": "scene",
-    "scene_explore_config": "scene",
+    "ArmSpec": "arm.spec", "BUILTIN_ARMS": "arm.spec", "load_arm": "arm.urdf", "write_arm_urdf": "arm.urdf",
+    "Exploration": "strategy.explore", "ExploreConfig": "strategy.explore", "explore": "world.explore",
+    "explore_robots": "strategy.explore", "rough_bound": "strategy.explore",
+    "InverseHull": "geometry.hull", "inverse_hull": "geometry.hull",
+    "ShapeError": "geometry.metrics", "shape_error": "geometry.metrics",
+    "BUILTIN_OBJECTS": "world.objects", "load_object": "world.objects",
+    "NoContactError": "app.pipeline", "ReconstructionError": "app.pipeline", "Result": "app.pipeline",
+    "reconstruct_exploration": "app.pipeline", "run": "app.pipeline", "write_result": "app.pipeline",
+    "ControlConfig": "strategy.encircle", "SimConfig": "core.settings", "SensorConfig": "robot.sensing",
+    "Robot": "robot.interface", "RobotLog": "robot.interface", "RecordingRobot": "robot.interface",
+    "LogRobot": "robot.interface", "Workcell": "robot.interface",
+    "ContactBand": "feeling.detect", "cached_band": "world.band",
+    "ThicknessCalibration": "world.calibration", "calibrate_thickness": "world.calibration",
+    "ContactQuality": "world.quality", "contact_quality": "world.quality",
+    "OutputConfig": "app.pipeline", "run_and_report": "app.pipeline", "quiet_c_output": "core.quiet",
+    "SceneConfig": "core.settings", "SceneSetup": "world.scene", "SceneWatch": "world.scene",
+    "settle_scene": "world.scene", "scene_explore_config": "world.scene",
 }
 
 __all__ = sorted(_EXPORTS)
@@ -50,17 +54,3 @@ def __getattr__(name):
 
 def __dir__():
     return sorted(set(globals()) | set(__all__))
-
-
-class _Package(types.ModuleType):
-    """The package's module type: importing the submodule ``explore3d.explore`` must not replace
-    the public function ``explore3d.explore`` (Python sets a package attribute for every loaded
-    submodule); the submodule stays available as ``sys.modules["explore3d.explore"]``."""
-
-    def __setattr__(self, name, value):
-        if name == "explore" and isinstance(value, types.ModuleType):
-            return
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package

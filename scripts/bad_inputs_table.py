@@ -2,7 +2,7 @@
 
     python scripts/bad_inputs_table.py > docs/bad_inputs.md
 
-Each command line runs in-process (explore3d.cli.main) in a fresh temporary folder, as the test
+Each command line runs in-process (explore3d.app.cli.main) in a fresh temporary folder, as the test
 runs it; the table gives the exit code and the one line it printed on stderr.
 """
 import contextlib
@@ -15,7 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from test_bad_input import CASES, _argv  # noqa: E402
 
-from explore3d.cli import main  # noqa: E402
+from explore3d.app.cli import main  # noqa: E402
 
 
 def main_table() -> None:

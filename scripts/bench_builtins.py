@@ -16,11 +16,11 @@ import time
 import numpy as np
 
 from explore3d import ExploreConfig, load_object, run
-from explore3d.kinematics import link_surface_points
-from explore3d.objects import BUILTIN_OBJECTS
-from explore3d.quality import contact_quality
-from explore3d.sdf import SignedDistance
-from explore3d.sensing import SensorConfig
+from explore3d.arm.kinematics import link_surface_points
+from explore3d.world.objects import BUILTIN_OBJECTS
+from explore3d.world.quality import contact_quality
+from explore3d.geometry.sdf import SignedDistance
+from explore3d.robot.sensing import SensorConfig
 
 
 def measure(obj: str, sensors: SensorConfig, jobs: int) -> dict:

@@ -12,12 +12,12 @@ import time
 import numpy as np
 
 from explore3d import ArmSpec, ExploreConfig, load_arm, load_object, run
-from explore3d.band import cached_band
-from explore3d.defaults import DEFAULT_A
-from explore3d.encircle import ControlConfig, run_wrap
-from explore3d.explore import planar_wrap_poses, rough_bound
-from explore3d.robot import JointCommand, RecordingRobot
-from explore3d.sim import ArmSimulation
+from explore3d.world.band import cached_band
+from explore3d.core.defaults import DEFAULT_A
+from explore3d.strategy.encircle import ControlConfig, run_wrap
+from explore3d.strategy.explore import planar_wrap_poses, rough_bound
+from explore3d.robot.interface import JointCommand, RecordingRobot
+from explore3d.world.sim import ArmSimulation
 
 
 def bench_wrap(spec, attempts=1, repeats=5):

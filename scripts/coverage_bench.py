@@ -1,10 +1,10 @@
-"""Coverage benchmark of non-convex objects: explore3d.compare per object, one JSON per (object, label).
+"""Coverage benchmark of non-convex objects: explore3d.app.compare per object, one JSON per (object, label).
 
     python scripts/coverage_bench.py [--objects concave nonconvex | NAME ...] [--out runs/coverage]
                                      [--label default] [--jobs 2] [--encircle straight|curl-back]
                                      [--probes ROUNDS] [--fingers N] [--no-free-space] [--save]
 
-For each object runs :func:`explore3d.compare.compare` once (the default 3D exploration, or the
+For each object runs :func:`explore3d.app.compare.compare` once (the default 3D exploration, or the
 strategy chosen with ``--encircle``, ``--probes``, ``--fingers`` and ``--no-free-space`` as in ``explore3d compare``: link
 points, localised contacts, ideal skin all / loaded contacts) and writes ``OUT/OBJECT.LABEL.json``
 (written to a temporary file, then renamed).  Files already present are skipped, so a killed run
@@ -64,9 +64,9 @@ def dense_reference(mesh, centre) -> float:
     """Volume error (%) of the inverse hull of N_DENSE uniform surface samples about ``centre``."""
     import trimesh
 
-    from explore3d.defaults import DEFAULT_A
-    from explore3d.hull import inverse_hull
-    from explore3d.metrics import volume_error
+    from explore3d.core.defaults import DEFAULT_A
+    from explore3d.geometry.hull import inverse_hull
+    from explore3d.geometry.metrics import volume_error
 
     P, _ = trimesh.sample.sample_surface(mesh, N_DENSE, seed=np.random.default_rng(0))
     hull = inverse_hull(P, centre=centre, a=DEFAULT_A)
@@ -84,8 +84,8 @@ def git_commit() -> str:
 
 def save_exploration(ex, skin, folder: Path) -> None:
     """Keep ``ex``'s hull points, free space and ideal-skin points in ``folder``."""
-    from explore3d.freespace import save_swept
-    from explore3d.pipeline import write_exploration_points
+    from explore3d.reconstruction.freespace import save_swept
+    from explore3d.app.pipeline import write_exploration_points
 
     folder.mkdir(parents=True, exist_ok=True)
     write_exploration_points(ex, folder / "points.ply")
@@ -97,10 +97,11 @@ def save_exploration(ex, skin, folder: Path) -> None:
 def measure(name: str, label: str, config, save: Path | None = None) -> dict:
     import dataclasses
 
-    from explore3d._quiet import quiet_c_output
-    from explore3d.compare import compare_exploration
-    from explore3d.explore import explore, rough_bound
-    from explore3d.skin import ideal_skin
+    from explore3d.core.quiet import quiet_c_output
+    from explore3d.app.compare import compare_exploration
+    from explore3d.world.explore import explore
+    from explore3d.strategy.explore import rough_bound
+    from explore3d.world.skin import ideal_skin
 
     mesh = load(name)
     centre, radius = rough_bound(mesh.vertices)
@@ -183,7 +184,7 @@ def main():
     args = ap.parse_args()
     import dataclasses
 
-    from explore3d.cli import explore_config
+    from explore3d.app.settings import explore_config
 
     opts = {"jobs": args.jobs, "encircle": args.encircle}
     if args.probes is not None or args.no_free_space:

@@ -5,7 +5,7 @@
 Reads what ``scripts/coverage_bench.py --save`` kept in ``DIR/OBJECT.LABEL/`` (points.ply with the
 localised contacts and their normals, free_space.npz, skin.npz) and ``DIR/OBJECT.LABEL.json`` (the
 rough bound the robot was told), rebuilds the estimate with each of
-:data:`explore3d.estimators.ESTIMATORS` from the localised contacts and from the ideal skin's
+:data:`explore3d.reconstruction.estimators.ESTIMATORS` from the localised contacts and from the ideal skin's
 points (the implicit surface needs normals: localised only), scores each against the true mesh
 (volume error, % of the true volume) and prints a Markdown table with medians.  Evaluation only:
 it reads the true mesh to score.
@@ -26,10 +26,10 @@ from coverage_bench import GROUPS, load  # noqa: E402
 
 
 def study(folder: Path, rec: dict, mesh) -> dict:
-    from explore3d.estimators import ESTIMATORS, estimate
-    from explore3d.export import read_points_ply
-    from explore3d.freespace import load_swept
-    from explore3d.metrics import volume_error
+    from explore3d.reconstruction.estimators import ESTIMATORS, estimate
+    from explore3d.app.export import read_points_ply
+    from explore3d.reconstruction.freespace import load_swept
+    from explore3d.geometry.metrics import volume_error
 
     centre, radius = np.array(rec["centre_m"]), float(rec["radius_m"])
     P, props = read_points_ply(folder / "points.ply", with_properties=True)
@@ -53,7 +53,7 @@ def study(folder: Path, rec: dict, mesh) -> dict:
 
 
 def main():
-    from explore3d.estimators import ESTIMATORS
+    from explore3d.reconstruction.estimators import ESTIMATORS
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dir", type=Path)

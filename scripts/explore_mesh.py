@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from explore3d import ExploreConfig, load_object, quiet_c_output, run, write_result
-from explore3d.defaults import DEFAULT_A
+from explore3d.core.defaults import DEFAULT_A
 
 
 def _positive(text):

@@ -5,7 +5,7 @@ For each object: one exploration (record=True, a longer settle so each detection
 quasi-static moment), the pipeline's reconstruction from the link points (the paper's rule), the
 contacts localised from the joint torques at the end of each detection's settle (their mid-height
 points, with their wrap ids), and the ideal skin (PyBullet's contact points at the same readings);
-each point set is hulled the same way (explore3d.pipeline.reconstruct_points) and scored.
+each point set is hulled the same way (explore3d.reconstruction.hull_input.reconstruct_points) and scored.
 
     python3 scripts/localise_hull.py --objects cube cylinder --settle 30
 """
@@ -19,13 +19,13 @@ import time
 import numpy as np
 
 from explore3d import ExploreConfig, load_object
-from explore3d.compare import _column, format_compare
-from explore3d.encircle import ControlConfig
-from explore3d.kinematics import gravity_torques
-from explore3d.localise import localise
-from explore3d.pipeline import run
-from explore3d.sensing import SensorConfig
-from explore3d.skin import ideal_skin
+from explore3d.app.compare import _column, format_compare
+from explore3d.strategy.encircle import ControlConfig
+from explore3d.arm.kinematics import gravity_torques
+from explore3d.feeling.localise import localise
+from explore3d.app.pipeline import run
+from explore3d.robot.sensing import SensorConfig
+from explore3d.world.skin import ideal_skin
 
 
 def localised_points(ex, sigma, pos_sigma=0.0):

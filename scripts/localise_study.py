@@ -3,7 +3,7 @@
 Runs wraps through the robot interface, recording every reading (RecordingRobot) while an
 observing wrapper (evaluation only) keeps PyBullet's arm-object contact points after every physics
 step.  At chosen moments of each attempt it localises the contacts from the reading alone
-(explore3d.localise, joint angles and motor torques) and scores them against the contacts the
+(explore3d.feeling.localise, joint angles and motor torques) and scores them against the contacts the
 reading reflects (the physics step ``delay_steps`` earlier).
 
 Moments: ``settle`` = the last settle step after each detection (Attempt.detect_step[k]);
@@ -24,14 +24,14 @@ import time
 import numpy as np
 
 from explore3d import ExploreConfig, load_arm, load_object
-from explore3d.band import cached_band
-from explore3d.encircle import run_wrap
-from explore3d.explore import rough_bound, wrap_poses
-from explore3d.kinematics import gravity_torques, link_transforms
-from explore3d.localise import INNER_SIDE, INNER_SIDE_ROUNDED, KINDS, inverse_dynamics, localise
-from explore3d.robot import JointCommand, JointReading, RecordingRobot, Robot
-from explore3d.sensing import SensorConfig
-from explore3d.sim import ArmSimulation
+from explore3d.world.band import cached_band
+from explore3d.strategy.encircle import run_wrap
+from explore3d.strategy.explore import rough_bound, wrap_poses
+from explore3d.arm.kinematics import gravity_torques, link_transforms
+from explore3d.feeling.localise import INNER_SIDE, INNER_SIDE_ROUNDED, KINDS, inverse_dynamics, localise
+from explore3d.robot.interface import JointCommand, JointReading, RecordingRobot, Robot
+from explore3d.robot.sensing import SensorConfig
+from explore3d.world.sim import ArmSimulation
 
 RADIUS_OK = 3.0e-3
 LOADED = 1.0e-3

@@ -9,11 +9,11 @@ calibration protocol or the package version); ``tests/test_robot.py`` fails unti
 import json
 
 from explore3d import load_arm
-from explore3d.band import FACTORY_SETTINGS, band_cache_key, calibrate_band, factory_band_path
-from explore3d.encircle import ControlConfig
-from explore3d.io import atomic_write_text
-from explore3d.sensing import SensorConfig
-from explore3d.sim import SimConfig
+from explore3d.world.band import FACTORY_SETTINGS, band_cache_key, calibrate_band, factory_band_path
+from explore3d.strategy.encircle import ControlConfig
+from explore3d.core.io import atomic_write_text
+from explore3d.robot.sensing import SensorConfig
+from explore3d.core.settings import SimConfig
 
 
 def main():

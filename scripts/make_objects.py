@@ -1,4 +1,4 @@
-"""Regenerate objects/<name>.stl: every built-in object of explore3d.objects as a binary STL in metres.
+"""Regenerate objects/<name>.stl: every built-in object of explore3d.world.objects as a binary STL in metres.
 
 Usage: python scripts/make_objects.py [--out objects]
 
@@ -24,7 +24,7 @@ def main(argv=None) -> int:
                         help="output folder (default: the repository's objects/)")
     args = parser.parse_args(argv)
 
-    from explore3d.objects import BUILTIN_OBJECTS, object_size
+    from explore3d.world.objects import BUILTIN_OBJECTS, object_size
 
     args.out.mkdir(parents=True, exist_ok=True)
     for name, info in BUILTIN_OBJECTS.items():

@@ -1,7 +1,7 @@
 """How thin can PyBullet's collision margin be made while the simulation stays stable?
 
 For every (object, collision_margin) pair asked for, runs the DEFAULT 3D exploration
-(``explore3d.pipeline.run(load_object(name), "default", ExploreConfig(sim=SimConfig(collision_margin=m),
+(``explore3d.app.pipeline.run(load_object(name), "default", ExploreConfig(sim=SimConfig(collision_margin=m),
 jobs=JOBS), a=0.05)``) and appends one JSON line to the results file with:
 
 * accuracy: volume error %, IoU, n_contacts, points, exploration wall time;
@@ -48,10 +48,10 @@ def margin_key(m) -> str:
 
 
 def analyse(res, mesh) -> dict:
-    from explore3d.encircle import StopReason
-    from explore3d.kinematics import link_surface_points
-    from explore3d.quality import contact_gaps
-    from explore3d.sdf import SignedDistance
+    from explore3d.strategy.encircle import StopReason
+    from explore3d.arm.kinematics import link_surface_points
+    from explore3d.world.quality import contact_gaps
+    from explore3d.geometry.sdf import SignedDistance
 
     ex = res.exploration
     spec = ex.spec
@@ -87,7 +87,7 @@ def analyse(res, mesh) -> dict:
     Din = sdf(Pin).min(axis=2)  # (m, n)
     g_flag = Din[C[ok]]
     # the hull input points themselves (after the radius and outlier filters)
-    from explore3d.pipeline import hull_input_mask
+    from explore3d.reconstruction.hull_input import hull_input_mask
     keep = hull_input_mask(ex.points, ex.point_wrap, res.centre, res.radius)
     dp = sdf(ex.points)
     # quality.contact_gaps: the contact link's inner face at 1 mm pitch
@@ -144,11 +144,11 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     import explore3d
-    from explore3d.encircle import ControlConfig
-    from explore3d.explore import ExploreConfig
-    from explore3d.objects import load_object
-    from explore3d.pipeline import run
-    from explore3d.sim import SimConfig
+    from explore3d.strategy.encircle import ControlConfig
+    from explore3d.strategy.explore import ExploreConfig
+    from explore3d.world.objects import load_object
+    from explore3d.app.pipeline import run
+    from explore3d.core.settings import SimConfig
 
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     done = set()

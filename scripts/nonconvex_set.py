@@ -43,7 +43,7 @@ def _profiles() -> dict[str, tuple[Polygon, float]]:
 
 
 def write() -> None:
-    from explore3d.objects import _extrude
+    from explore3d.world.objects import _extrude
 
     OUT.mkdir(parents=True, exist_ok=True)
     for name, (poly, depth) in _profiles().items():

@@ -1,7 +1,7 @@
 """Parameter study of the inverse convex hull: error against 'a' and link discretisation (paper, V-B).
 
 The paper fixes a = 0.2 and leaves "the optimum values of 'a', and level of discretisation"
-as future work.  This script runs the paper's simulated experiment (explore3d.simulated:
+as future work.  This script runs the paper's simulated experiment (explore3d.world.simulated:
 random straight 8 mm links laid against the object) for 2D objects (80 mm square, 63 mm
 100-gon circle, concave L) and 3D objects (80 mm cube, 50 mm sphere, 100-gon cylinder), sweeps
 'a' (log-spaced) and the points per link, and writes to --out:
@@ -49,7 +49,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def study_objects():
-    from explore3d import objects
+    from explore3d.world import objects
 
     return {
         "square (2D)": objects.square(0.08),
@@ -69,7 +69,7 @@ def main(argv=None) -> int:
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
-    from explore3d.simulated import simulated_case
+    from explore3d.world.simulated import simulated_case
 
     if args.quick:
         args.a_count, args.seeds, args.points_per_link, args.n_links_3d = 3, 1, [2, 5], 300

@@ -4,7 +4,7 @@ link points and from the localised contacts: area error and point counts (BENCHM
     python scripts/planar_points.py
 """
 from explore3d import ExploreConfig, load_object
-from explore3d.pipeline import run
+from explore3d.app.pipeline import run
 for obj in ("cube", "box", "cylinder", "sphere", "capsule", "cone", "l_block", "u_channel", "star_prism"):
     row = [obj]
     for pts in ("links", "contacts"):

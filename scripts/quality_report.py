@@ -17,12 +17,12 @@ import subprocess
 import time
 
 from explore3d import ExploreConfig, explore, load_object, run
-from explore3d.calibration import calibrate_thickness
-from explore3d.defaults import DEFAULT_A
-from explore3d.quality import contact_quality
-from explore3d.replay import diagnose_false_detections
+from explore3d.world.calibration import calibrate_thickness
+from explore3d.core.defaults import DEFAULT_A
+from explore3d.world.quality import contact_quality
+from explore3d.world.quality import diagnose_false_detections
 
-A = DEFAULT_A  # inverse-hull coarseness of the scored reconstructions (explore3d.defaults)
+A = DEFAULT_A  # inverse-hull coarseness of the scored reconstructions (explore3d.core.defaults)
 
 
 def config_for(mode: str, jobs: int, **kw) -> ExploreConfig:

@@ -26,8 +26,9 @@ ROWS = ("table", "fixed", "friction 0", "exact model", "reset world", "floating"
 
 
 def config_for(row: str):
-    from explore3d.explore import ExploreConfig
-    from explore3d.scene import SceneConfig, scene_explore_config
+    from explore3d.strategy.explore import ExploreConfig
+    from explore3d.core.settings import SceneConfig
+    from explore3d.world.scene import scene_explore_config
 
     cfg = scene_explore_config("table")
     sc = cfg.scene
@@ -49,9 +50,9 @@ def config_for(row: str):
 
 
 def one(name: str, row: str) -> dict:
-    from explore3d.objects import load_object
-    from explore3d.pipeline import run
-    from explore3d.scene import SceneWatch, settle_scene
+    from explore3d.world.objects import load_object
+    from explore3d.app.pipeline import run
+    from explore3d.world.scene import SceneWatch, settle_scene
 
     cfg = config_for(row)
     mesh = load_object(name)

@@ -37,7 +37,7 @@ def sweep(objects, grids, out: Path, workers: int, ray: bool) -> float:
 
 
 def rows(out: Path) -> list[dict]:
-    from explore3d.sweep import TIMING_COLUMNS, read_rows
+    from explore3d.app.sweep import TIMING_COLUMNS, read_rows
 
     return sorted(({k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in read_rows(out)),
                   key=lambda r: r["key"])

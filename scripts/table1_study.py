@@ -18,7 +18,7 @@ Sections (keys of results.json):
   placement   the cube/cylinder explored with the straight arm's inner face `gap` mm from the object's
               near side (the package: rough radius 1.05 x the 3D half-diagonal + 10 mm clearance) and
               with the object's centre `lead` mm along the arm from the base (package: lead = radius).
-              Done by replacing explore3d.explore.wrap_poses inside this script only; the
+              Done by replacing explore3d.strategy.explore.wrap_poses inside this script only; the
               reconstruction's rough centre/radius stay the package's.
   mirror      the paper's Fig. 7 "mirrored results" vs ours (second wrap = the arm turned over,
               x -> -x through the centre, same start side) vs a mirror across the arm's axis (y -> -y).
@@ -38,13 +38,13 @@ from shapely.ops import unary_union
 
 import importlib
 
-ex_mod = importlib.import_module("explore3d.explore")  # the module (the package re-exports the function)
-from explore3d.directions import planar_wrap_poses
-from explore3d.explore import ExploreConfig
-from explore3d.hull import inverse_hull
-from explore3d.metrics import shape_error
-from explore3d.objects import cylinder, load_object
-from explore3d.pipeline import reconstruct_exploration, run
+ex_mod = importlib.import_module("explore3d.strategy.explore")  # the module (the package re-exports the function)
+from explore3d.geometry.directions import planar_wrap_poses
+from explore3d.strategy.explore import ExploreConfig
+from explore3d.geometry.hull import inverse_hull
+from explore3d.geometry.metrics import shape_error
+from explore3d.world.objects import cylinder, load_object
+from explore3d.app.pipeline import reconstruct_exploration, run
 
 OUT = Path(__file__).resolve().parent.parent / "table1_study"
 A = 0.2
@@ -124,7 +124,7 @@ def split_error(est, truth, corner=0.015):
 
 def faces_of(res):
     """Per contact-flagged link: (wrap, attempt, link, inner-face segment (2, 2), inward unit normal)."""
-    from explore3d.kinematics import link_transforms
+    from explore3d.arm.kinematics import link_transforms
 
     ex = res.exploration
     spec = ex.spec
@@ -207,7 +207,7 @@ def figure(res, path, title, over=None, under=None):
     import matplotlib.pyplot as plt
     from matplotlib.patches import Polygon as MPoly
 
-    from explore3d.kinematics import link_transforms
+    from explore3d.arm.kinematics import link_transforms
 
     ex = res.exploration
     spec = ex.spec
@@ -317,7 +317,7 @@ def main(quick=False):
     # --- perfect contacts / reconstruction alone --------------------------------------------
     for (obj, dirs), res in base.items():
         row = {"object": obj, "directions": dirs, "package": res.error.percent}
-        from explore3d.pipeline import reconstruct_points
+        from explore3d.reconstruction.hull_input import reconstruct_points
 
         Pm, Wm = perfect_contacts(res)
         h = reconstruct_points(Pm, Wm, res.centre, res.radius, a=A)

@@ -6,7 +6,7 @@ compare the ratios (BENCHMARKS.md, first section):
 """
 import sys, time, json
 from explore3d import ExploreConfig, load_object
-from explore3d.explore import explore
+from explore3d.world.explore import explore
 out = {}
 for obj in ("cube", "cylinder"):
     mesh = load_object(obj)

@@ -17,7 +17,7 @@ import pytest
 if os.environ.get("EXPLORE3D_TEST_HIDE_OPEN3D"):
     sys.modules["open3d"] = None  # every `import open3d` now raises ImportError
 
-# The contact bands are measured once per setting and cached on disk (explore3d.band.cached_band).
+# The contact bands are measured once per setting and cached on disk (explore3d.world.band.cached_band).
 # The tests measure their own in a fresh folder, so no cache from earlier code or runs leaks in
 # (worker processes and subprocesses inherit the variable).
 if not os.environ.get("EXPLORE3D_TEST_KEEP_CACHE"):

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from explore3d import ArmSpec, ExploreConfig, load_object, run, shape_error
-from explore3d.pipeline import reconstruct_points
+from explore3d.reconstruction.hull_input import reconstruct_points
 
 SMALL_ARM = ArmSpec(name="small16", n_links=16, link_length=0.02)
 

@@ -3,10 +3,11 @@ import numpy as np
 import pybullet
 import pytest
 
-from explore3d.arm import BUILTIN_ARMS, ArmSpec, load_arm
-from explore3d.urdf import arm_urdf, write_arm_urdf
-from explore3d.kinematics import link_surface_points, link_transforms
-from explore3d.tolerances import FK_ATOL_M
+from explore3d.arm.spec import BUILTIN_ARMS, ArmSpec
+from explore3d.arm.urdf import load_arm
+from explore3d.arm.urdf import arm_urdf, write_arm_urdf
+from explore3d.arm.kinematics import link_surface_points, link_transforms
+from explore3d.core.tolerances import FK_ATOL_M
 
 
 def _random_T(rng):

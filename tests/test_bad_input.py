@@ -1,6 +1,6 @@
 """Bad input, tried as a new user would: every case exits 1 or 2 with one line on stderr naming
 the problem, no traceback, and nothing written (issue 21).  The command line runs in-process
-(``explore3d.cli.main``); the public API raises ValueError/TypeError (or the library's own
+(``explore3d.app.cli.main``); the public API raises ValueError/TypeError (or the library's own
 subclasses) with a message naming the fix.  None of these cases explores: each must be refused
 before the simulation starts."""
 import math
@@ -11,7 +11,7 @@ import pytest
 import trimesh
 from test_sweep_robust import _as_reader, shared_dir  # noqa: F401 (shared_dir: a fixture)
 
-from explore3d.cli import main
+from explore3d.app.cli import main
 
 
 def run_cli(capsys, argv):
@@ -52,7 +52,7 @@ def _huge_mesh(d: Path) -> Path:
 
 
 def _points(d: Path, P, name="p.ply", **props) -> Path:
-    from explore3d.export import write_points_ply
+    from explore3d.app.export import write_points_ply
 
     write_points_ply(np.asarray(P, float), d / name, **props)
     return d / name
@@ -213,7 +213,7 @@ def test_command_line_bad_input(tmp_path, capsys, monkeypatch, argv, code, word)
 
 
 def test_there_are_at_least_60_cases_over_every_command():
-    from explore3d.cli import build_parser
+    from explore3d.app.cli import build_parser
 
     assert len(CASES) >= 60
     sub = next(a for a in build_parser()._actions if a.dest == "command" or getattr(a, "choices", None))
@@ -275,7 +275,7 @@ def _no_exploring(monkeypatch):
     def explored(*args, **kwargs):
         raise AssertionError("the bad input reached the exploration")
 
-    for name in ("explore3d.pipeline", "explore3d.explore"):  # the package's `explore` is the function
+    for name in ("explore3d.app.pipeline", "explore3d.strategy.explore"):  # the package's `explore` is the function
         monkeypatch.setattr(importlib.import_module(name), "explore", explored)
 
 

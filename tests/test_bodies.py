@@ -1,13 +1,13 @@
-"""Tests of explore3d.bodies.one_body: known answers on boxes, slivers and cavities."""
+"""Tests of explore3d.geometry.bodies.one_body: known answers on boxes, slivers and cavities."""
 import logging
 
 import numpy as np
 import pytest
 import trimesh
 
-from explore3d.bodies import one_body
-from explore3d.carve import carve
-from explore3d.tolerances import FLOAT64_GEOMETRY_RTOL, SLIVER_RTOL
+from explore3d.geometry.bodies import one_body
+from explore3d.reconstruction.carve import carve
+from explore3d.core.tolerances import FLOAT64_GEOMETRY_RTOL, SLIVER_RTOL
 
 
 def _box(extent, centre=(0.0, 0.0, 0.0)):
@@ -35,7 +35,7 @@ def test_slivers_are_dropped_and_their_volumes_reported(seed):
 def test_a_real_piece_is_kept_with_a_warning(caplog):
     body = _box((0.08, 0.08, 0.08))
     piece = _box((0.02, 0.02, 0.02), (0.1, 0.0, 0.0))  # 1.6e-2 of the body: not a sliver
-    with caplog.at_level(logging.WARNING, logger="explore3d.bodies"):
+    with caplog.at_level(logging.WARNING, logger="explore3d.geometry.bodies"):
         out, dropped = one_body(trimesh.util.concatenate([body, piece]))
     assert dropped == () and out.body_count == 2
     assert "severed" in caplog.text
@@ -66,7 +66,7 @@ def test_the_stated_fraction_decides():
 def test_carving_never_returns_a_sliver():
     """A free slab that grazes a box's corner region leaves, after the smoothing and the boolean,
     no piece below the sliver fraction."""
-    from explore3d.freespace import SweptArea
+    from explore3d.reconstruction.freespace import SweptArea
 
     box = _box((0.04, 0.04, 0.04))
     rng = np.random.default_rng(0)

@@ -1,4 +1,4 @@
-"""explore3d.calibration: the thickness statistic recovers a known gap from synthetic contact
+"""explore3d.world.calibration: the thickness statistic recovers a known gap from synthetic contact
 points, and a calibration on the 60 mm ball reduces the contact gap of a real run on a
 different object (the 80 mm cube)."""
 from __future__ import annotations
@@ -10,19 +10,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from explore3d.arm import load_arm
-from explore3d.calibration import (
-    CALIBRATION_SPHERE_RADIUS_M,
-    REJECT_GAP_M,
-    calibrate_thickness,
-    calibration_sphere,
-    thickness_from_gaps,
-)
-from explore3d.explore import ExploreConfig, explore
-from explore3d.kinematics import link_surface_points
-from explore3d.objects import load_object
-from explore3d.quality import contact_point_gaps
-from explore3d.sdf import SignedDistance
+from explore3d.arm.urdf import load_arm
+from explore3d.world.calibration import CALIBRATION_SPHERE_RADIUS_M, REJECT_GAP_M, calibrate_thickness, calibration_sphere, thickness_from_gaps
+from explore3d.strategy.explore import ExploreConfig
+from explore3d.world.explore import explore
+from explore3d.arm.kinematics import link_surface_points
+from explore3d.world.objects import load_object
+from explore3d.world.quality import contact_point_gaps
+from explore3d.geometry.sdf import SignedDistance
 
 SPEC = load_arm("default")
 

@@ -1,4 +1,4 @@
-"""Tests of the command line (explore3d.cli.main, called in-process)."""
+"""Tests of the command line (explore3d.app.cli.main, called in-process)."""
 import json
 import math
 import sys
@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from explore3d.cli import build_parser, explore_config, main, resolve_run_options
-from explore3d.explore import ExploreConfig
-from explore3d.objects import builtin_object_names, load_object
+from explore3d.app.cli import build_parser, main
+from explore3d.app.settings import explore_config, resolve_run_options
+from explore3d.strategy.explore import ExploreConfig
+from explore3d.world.objects import builtin_object_names, load_object
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -68,7 +69,7 @@ def test_objects_lists_builtins(capsys):
 
 
 def test_arm_writes_loadable_urdf(tmp_path, capsys):
-    from explore3d.arm import load_arm
+    from explore3d.arm.urdf import load_arm
 
     path = tmp_path / "tiny.urdf"
     code, _, err = run(capsys, "arm", "--out", str(path), "--n-links", "8", "--link-length", "0.02",
@@ -102,7 +103,7 @@ def test_flags_into_explore_config():
     assert cfg.offsets == ExploreConfig().offsets  # unset: the dataclass default
     import inspect
 
-    from explore3d.pipeline import run as api_run
+    from explore3d.app.pipeline import run as api_run
 
     # the command line's default coarseness is the API's
     assert (opts["object"], opts["a"], opts["format"]) == ("cube", inspect.signature(api_run).parameters["a"].default, "obj")
@@ -217,7 +218,7 @@ def test_run_bad_rough_bound(tmp_path, capsys, argv, word):
 # --- reconstruct and evaluate ----------------------------------------------------------------------
 
 def test_reconstruct_sphere_points(tmp_path, capsys):
-    from explore3d.export import write_points_ply
+    from explore3d.app.export import write_points_ply
 
     rng = np.random.default_rng(3)
     v = rng.normal(size=(400, 3))
@@ -234,7 +235,7 @@ def test_reconstruct_sphere_points(tmp_path, capsys):
 def test_reconstruct_implicit_estimator_reads_the_normals(tmp_path, capsys):
     """--estimator implicit fits the points and their nx, ny, nz; without normals it says so."""
     from explore3d import load_object
-    from explore3d.export import write_points_ply
+    from explore3d.app.export import write_points_ply
 
     mesh = load_object("l_block")
     P, fi = trimesh.sample.sample_surface(mesh, 3000, seed=np.random.default_rng(0))
@@ -254,7 +255,7 @@ def test_reconstruct_implicit_estimator_reads_the_normals(tmp_path, capsys):
 
 
 def test_reconstruct_planar_points_to_polygon(tmp_path, capsys):
-    from explore3d.export import write_points_ply
+    from explore3d.app.export import write_points_ply
 
     t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
     P = np.column_stack([0.04 * np.cos(t), 0.04 * np.sin(t)])
@@ -276,7 +277,7 @@ def test_reconstruct_planar_points_to_polygon(tmp_path, capsys):
     (["p.ply", "--out", "m.dae"], 2, "dae"),
 ])
 def test_reconstruct_errors(tmp_path, capsys, monkeypatch, argv, code_, word):
-    from explore3d.export import write_points_ply
+    from explore3d.app.export import write_points_ply
 
     write_points_ply(np.random.default_rng(0).normal(size=(30, 3)), tmp_path / "p.ply")
     monkeypatch.chdir(tmp_path)
@@ -286,7 +287,7 @@ def test_reconstruct_errors(tmp_path, capsys, monkeypatch, argv, code_, word):
 
 
 def test_evaluate_meshes_known_answer(tmp_path, capsys):
-    from explore3d.export import write_mesh
+    from explore3d.app.export import write_mesh
 
     big = load_object("cube", scale=1.1)  # about the cube's centre (the origin)
     write_mesh(big, tmp_path / "big.off")
@@ -321,11 +322,11 @@ def test_evaluate_bad_inputs(tmp_path, capsys):
 
 def test_table1_wiring(capsys, monkeypatch):
     rows = [{"case": "cube", "paper_area_error_m2": 1e-4, "paper_percent": 2.0, "area_error_m2": 5e-5, "percent": 1.0}]
-    fake = types.ModuleType("explore3d.table1")
+    fake = types.ModuleType("explore3d.app.table1")
     calls = []
     fake.table1_rows = lambda **kw: calls.append(kw) or rows
-    monkeypatch.setitem(sys.modules, "explore3d.table1", fake)
-    monkeypatch.delattr("explore3d.table1", raising=False)  # the package attribute, if the real one was imported
+    monkeypatch.setitem(sys.modules, "explore3d.app.table1", fake)
+    monkeypatch.delattr("explore3d.app.table1", raising=False)  # the package attribute, if the real one was imported
     code, out, _ = run(capsys, "table1", "--json")
     assert code == 0
     assert json.loads(out) == rows
@@ -343,9 +344,9 @@ def test_table1_wiring(capsys, monkeypatch):
 def test_run_planar_end_to_end(tmp_path, capsys):
     import pybullet as p
 
-    from explore3d.export import read_points_ply
-    from explore3d.metrics import shape_error
-    from explore3d.objects import cross_section
+    from explore3d.app.export import read_points_ply
+    from explore3d.geometry.metrics import shape_error
+    from explore3d.world.objects import cross_section
     from shapely.geometry import Polygon
 
     arm = tmp_path / "tiny.urdf"
@@ -433,7 +434,7 @@ def test_cli_and_api_give_the_same_estimate(tmp_path, capsys, small_arm, mode):
     command line also records the trajectories for its quality figures: recording changes nothing)."""
     from explore3d import ExploreConfig
     from explore3d import run as api_run
-    from explore3d.active import ProbeConfig
+    from explore3d.strategy.active import ProbeConfig
 
     out = tmp_path / "o"
     code, _, err = run(capsys, "run", "l_block", "--out", str(out), "--arm", str(small_arm), *_FAST[mode],
@@ -464,7 +465,7 @@ def test_run_every_object(tmp_path, capsys, small_arm, obj, mode):
     """A fast run on each object: a report with finite errors against the right truth, an estimate
     mesh that loads as a closed volume, inside the robot's rough bound."""
     from explore3d import rough_bound
-    from explore3d.pipeline import planar_truth
+    from explore3d.app.pipeline import planar_truth
 
     size = ["--size", "0.1"] if obj.startswith("pybullet_data:") else []
     out = tmp_path / "o"
@@ -515,7 +516,7 @@ HEAVY = ("numpy", "scipy", "trimesh", "shapely", "pybullet", "matplotlib", "tqdm
 
 @pytest.mark.parametrize("argv", [["-m", "explore3d", "--help"], ["-m", "explore3d", "run", "--help"],
                                   # what the installed console script does
-                                  ["-c", "import sys; from explore3d.cli import main; sys.exit(main(['run', '--help']))"]])
+                                  ["-c", "import sys; from explore3d.app.cli import main; sys.exit(main(['run', '--help']))"]])
 def test_help_imports_no_heavy_modules(argv):
     """``explore3d --help`` and ``explore3d run --help`` import none of the heavy dependencies
     (read from ``python -X importtime``, which lists every module the process imported)."""
@@ -531,12 +532,12 @@ def test_public_names_are_lazy():
     """``import explore3d`` is light; each public name loads on first use, ``explore`` stays the function
     even after its submodule is imported, and ``dir``/``__all__`` list every name."""
     code = ("import sys, explore3d; light = sorted(m for m in %r if m in sys.modules); "
-            "import explore3d.explore; from explore3d import explore, run, __all__; import explore3d as e; "
+            "import explore3d.strategy.explore; from explore3d import explore, run, __all__; import explore3d as e; "
             "print(light, callable(explore) and explore.__module__, run.__module__, "
             "all(n in dir(e) and getattr(e, n) is not None for n in __all__))" % (HEAVY,))
     r = _python("-c", code)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["[]", "explore3d.explore", "explore3d.pipeline", "True"]
+    assert r.stdout.split() == ["[]", "explore3d.strategy.explore", "explore3d.app.pipeline", "True"]
     r = _python("-c", "import explore3d; explore3d.nonesuch")
     assert r.returncode == 1 and "has no attribute 'nonesuch'" in r.stderr
 
@@ -592,13 +593,16 @@ def test_quality_figures_are_opt_in(tmp_path, capsys, small_arm):
 
 
 def test_default_a_is_one_value_outside_the_paper_replica():
-    """One default coarseness (explore3d.defaults.DEFAULT_A) everywhere; the paper's 0.2 only in its replica."""
+    """One default coarseness (explore3d.core.defaults.DEFAULT_A) everywhere; the paper's 0.2 only in its replica."""
     import importlib.util
     import inspect
 
-    from explore3d import hull, pipeline, simulated, table1
-    from explore3d.cli import RUN_DEFAULTS
-    from explore3d.defaults import DEFAULT_A, PAPER_A
+    from explore3d.geometry import hull
+    from explore3d.app import pipeline
+    from explore3d.world import simulated
+    from explore3d.app import table1
+    from explore3d.app.settings import RUN_DEFAULTS
+    from explore3d.core.defaults import DEFAULT_A, PAPER_A
 
     def default(f):
         return inspect.signature(f).parameters["a"].default
@@ -622,8 +626,8 @@ def test_reconstruct_builds_the_hull_input_as_run_does(tmp_path, capsys, small_a
     estimate: the same rough-bound cut and the same angular outlier filter over the wrap ids in the
     file.  (The star-prism run with link points has outliers among its points within the rough
     bound, so the comparison can tell; localised contacts are stored at their resolved heights.)"""
-    from explore3d.export import CONTACT_PROPERTIES, read_points_ply
-    from explore3d.pipeline import within_bound
+    from explore3d.app.export import CONTACT_PROPERTIES, read_points_ply
+    from explore3d.reconstruction.hull_input import within_bound
 
     out = tmp_path / "o"
     # without probes: their wraps leave the link points no outlier to drop (measured), and the
@@ -667,7 +671,7 @@ def _tall_box(path, height):
 def test_planar_extrusion_is_what_the_arm_sensed_not_the_true_height(tmp_path, capsys, small_arm):
     """Planar runs on an 80 mm and a 200 mm tall box: the exported estimate spans the arm's plane +-
     half a link height in both (the true height never leaks into it); --height H spans H."""
-    from explore3d.arm import load_arm
+    from explore3d.arm.urdf import load_arm
 
     h = load_arm(str(small_arm)).link_height
     common = ["--arm", str(small_arm), "--mode", "planar", "--directions", "3", "--no-pictures", "-q"]
@@ -693,7 +697,7 @@ def test_planar_extrusion_is_what_the_arm_sensed_not_the_true_height(tmp_path, c
 def test_table1_json_has_no_pybullet_banner():
     """The real ``explore3d table1 --json`` (about 8 s): stdout is exactly the JSON, and PyBullet's
     C-level banners reach neither stream."""
-    from explore3d._quiet import PYBULLET_BANNERS
+    from explore3d.core.quiet import PYBULLET_BANNERS
 
     r = _python("-m", "explore3d", "table1", "--json")
     assert r.returncode == 0, r.stderr
@@ -706,7 +710,7 @@ def test_table1_json_has_no_pybullet_banner():
 
 def test_run_prints_one_line_and_no_banner(tmp_path, small_arm):
     """The real entry point of ``run`` (progress bar off): one result line on stdout, nothing on stderr."""
-    from explore3d._quiet import PYBULLET_BANNERS
+    from explore3d.core.quiet import PYBULLET_BANNERS
 
     r = _python("-m", "explore3d", "run", "cube", "--out", str(tmp_path / "o"), "--arm", str(small_arm),
                 *_FAST["planar"], "--no-pictures", "-q")
@@ -738,8 +742,8 @@ def test_sensing_and_contact_margin_options_reach_the_report(tmp_path, capsys, s
 
 
 def test_scene_option_maps_to_the_table_scene_config():
-    from explore3d.cli import explore_config
-    from explore3d.scene import scene_explore_config
+    from explore3d.app.settings import explore_config
+    from explore3d.world.scene import scene_explore_config
 
     cfg = explore_config({"scene": "table"})
     assert cfg.scene == scene_explore_config("table").scene and cfg.sim.mass_error == 0.05

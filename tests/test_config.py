@@ -5,10 +5,10 @@ import sys
 
 import pytest
 
-from explore3d.encircle import ControlConfig
-from explore3d.explore import ExploreConfig
-from explore3d.sensing import SensorConfig
-from explore3d.sim import SimConfig
+from explore3d.strategy.encircle import ControlConfig
+from explore3d.strategy.explore import ExploreConfig
+from explore3d.robot.sensing import SensorConfig
+from explore3d.core.settings import SimConfig
 
 BAD = [
     (ControlConfig, dict(speed=0.0), "ControlConfig.speed.*rad/s"),
@@ -51,9 +51,9 @@ def test_defaults_are_valid_and_faces_become_a_tuple():
 def test_geometry_modules_import_neither_the_urdf_nor_the_simulation():
     """kinematics, hull, metrics, directions, detect and the robot interface are pure: importing them
     loads no URDF writer, no simulation module and no pybullet."""
-    code = ("import sys; import explore3d.kinematics, explore3d.hull, explore3d.metrics, explore3d.directions, "
-            "explore3d.detect, explore3d.robot, explore3d.sensing; "
-            "bad = [m for m in ('explore3d.urdf', 'explore3d.sim', 'pybullet') if m in sys.modules]; print(bad)")
+    code = ("import sys; import explore3d.arm.kinematics, explore3d.geometry.hull, explore3d.geometry.metrics, explore3d.geometry.directions, "
+            "explore3d.feeling.detect, explore3d.robot.interface, explore3d.robot.sensing; "
+            "bad = [m for m in ('explore3d.arm.urdf', 'explore3d.world.sim', 'pybullet') if m in sys.modules]; print(bad)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"

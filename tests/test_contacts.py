@@ -1,4 +1,4 @@
-"""Contacts localised from simulated readings with known answers (explore3d.contacts).
+"""Contacts localised from simulated readings with known answers (explore3d.feeling.contacts).
 
 A small fixed sphere is placed where a known link of the default arm will touch it; the arm runs
 one attempt through the robot interface with the default sensing; the settled reading of the
@@ -12,13 +12,13 @@ import pytest
 import trimesh
 
 from explore3d import ExploreConfig, load_arm
-from explore3d.band import cached_band
-from explore3d.contacts import (ContactSet, contact_uncertainty_m, contacts_for_hull, localise_attempts,
-                                localise_moment, resolve_heights, torque_sigma_nm)
-from explore3d.encircle import ControlConfig, Controller, run_attempt
-from explore3d.kinematics import link_transforms
-from explore3d.sensing import SensorConfig
-from explore3d.sim import ArmSimulation, SimConfig
+from explore3d.world.band import cached_band
+from explore3d.feeling.contacts import ContactSet, contact_uncertainty_m, contacts_for_hull, localise_attempts, localise_moment, resolve_heights, torque_sigma_nm
+from explore3d.strategy.encircle import ControlConfig, Controller, run_attempt
+from explore3d.arm.kinematics import link_transforms
+from explore3d.robot.sensing import SensorConfig
+from explore3d.world.sim import ArmSimulation
+from explore3d.core.settings import SimConfig
 
 SPEC = load_arm("default")
 R_BALL = 0.005
@@ -103,7 +103,7 @@ def test_free_space_readings_give_no_contact():
             still, reading = ctl.settle(q_ref)
             for _ in range(200):
                 ctl.send(q_ref)
-            from explore3d.encircle import Moment
+            from explore3d.strategy.encircle import Moment
 
             m = Moment(joint=0, step=ctl.steps, still=True, reading=ctl.reading)
             assert localise_moment(SPEC, m, T, GRAVITY, SensorConfig()).contacts == ()

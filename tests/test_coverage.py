@@ -1,10 +1,10 @@
 """Coverage of non-convex objects: free space and probes reach into what the straight sweeps bridge."""
 import trimesh
 
-from explore3d.active import ProbeConfig
-from explore3d.explore import ExploreConfig
-from explore3d.objects import u_channel
-from explore3d.pipeline import run
+from explore3d.strategy.active import ProbeConfig
+from explore3d.strategy.explore import ExploreConfig
+from explore3d.world.objects import u_channel
+from explore3d.app.pipeline import run
 
 
 def test_probes_and_free_space_empty_most_of_the_u_channels_slot():

@@ -3,16 +3,17 @@ import numpy as np
 import pytest
 import trimesh
 
-from explore3d.arm import ArmSpec
-from explore3d.band import cached_band
-from explore3d.encircle import ControlConfig, StopReason, run_wrap
-from explore3d.explore import ExploreConfig, explore, rough_bound
-from explore3d.objects import cube, square
-from explore3d.pipeline import reconstruct_exploration
-from explore3d.contacts import localise_attempts
-from explore3d.robot import ForwardingRobot
-from explore3d.sensing import SensorConfig
-from explore3d.sim import ArmSimulation
+from explore3d.arm.spec import ArmSpec
+from explore3d.world.band import cached_band
+from explore3d.strategy.encircle import ControlConfig, StopReason, run_wrap
+from explore3d.strategy.explore import ExploreConfig, rough_bound
+from explore3d.world.explore import explore
+from explore3d.world.objects import cube, square
+from explore3d.app.pipeline import reconstruct_exploration
+from explore3d.feeling.contacts import localise_attempts
+from explore3d.robot.interface import ForwardingRobot
+from explore3d.robot.sensing import SensorConfig
+from explore3d.world.sim import ArmSimulation
 
 #: A small arm (16 x 20 mm) keeps these tests fast; full-size runs live in scripts/ and BENCHMARKS.md.
 SMALL = ArmSpec(name="small16", n_links=16, link_length=0.02)
@@ -93,7 +94,7 @@ def test_contact_faces_touch_the_cube():
     d = []
     for w in ex.attempts:
         for att in w:
-            from explore3d.kinematics import link_surface_points
+            from explore3d.arm.kinematics import link_surface_points
 
             P = link_surface_points(SMALL, att.q, att.T_world_base, n_along=5, n_height=1)
             sd = trimesh.proximity.signed_distance(m, P.reshape(-1, 3)).reshape(SMALL.n_links, -1)
@@ -124,10 +125,10 @@ def test_a_wrap_does_not_depend_on_the_wraps_before_it():
     """Each wrap runs in a world of its own: PyBullet's restoreState leaves state behind.  Measured
     with one world per worker: wrap 11 of the default 3D run on the cylinder came out differently
     after wrap 10 than alone, so results depended on the number of jobs.  The same case here."""
-    from explore3d.arm import load_arm
-    from explore3d.band import cached_band
-    from explore3d.explore import _WORKER, _init_worker, _run_one, wrap_poses
-    from explore3d.objects import cylinder
+    from explore3d.arm.urdf import load_arm
+    from explore3d.world.band import cached_band
+    from explore3d.strategy.explore import _WORKER, _init_worker, _run_one, wrap_poses
+    from explore3d.world.objects import cylinder
 
     m, spec, cfg = cylinder(), load_arm("default"), ExploreConfig()
     c, r = rough_bound(m.vertices)
@@ -151,7 +152,7 @@ def test_curl_back_offsets_are_a_hairpin_beyond_the_straight_links():
 
     import pytest
 
-    from explore3d.encircle import CurlBack
+    from explore3d.strategy.encircle import CurlBack
 
     cb = CurlBack(straight_links=2, turn=math.pi, bend=0.45)
     off = cb.offsets(SMALL, ControlConfig(), 3)
@@ -172,8 +173,8 @@ def test_curl_back_on_a_convex_object_is_no_worse_than_the_straight_sweep():
     24.5% volume error straight, 11.9% curl-back (35 hulled contacts against 26); the cylinder
     28.5% / 15.5%.  Every curl-back attempt curls after its first contact and keeps the hairpin
     out of the object (the carved free space, from the measured angles, holds no cube)."""
-    from explore3d.encircle import CurlBack
-    from explore3d.pipeline import run
+    from explore3d.strategy.encircle import CurlBack
+    from explore3d.app.pipeline import run
 
     errs, runs = {}, {}
     for name, cb in (("straight", None), ("curl-back", CurlBack())):

@@ -1,13 +1,13 @@
-"""Estimators for shapes not star-shaped about one centre (explore3d.estimators): geometric facts on
+"""Estimators for shapes not star-shaped about one centre (explore3d.reconstruction.estimators): geometric facts on
 dense samples of known meshes (no simulation)."""
 import numpy as np
 import pytest
 import trimesh
 
-from explore3d import estimators as E
+from explore3d.reconstruction import estimators as E
 from explore3d import load_object
-from explore3d.explore import rough_bound
-from explore3d.metrics import volume_error
+from explore3d.strategy.explore import rough_bound
+from explore3d.geometry.metrics import volume_error
 
 
 def samples(name, n=3000, seed=0):

@@ -1,11 +1,10 @@
-"""Tests of explore3d.export: mesh formats, the estimate URDF, point PLY files."""
+"""Tests of explore3d.app.export: mesh formats, the estimate URDF, point PLY files."""
 import numpy as np
 import pytest
 import trimesh
 
-from explore3d.export import (MESH_FORMATS, POINT_PROPERTIES, check_format, points_2d_if_planar, read_points_ply,
-                              write_estimate_urdf, write_mesh, write_points_ply)
-from explore3d.objects import load_object
+from explore3d.app.export import MESH_FORMATS, POINT_PROPERTIES, check_format, points_2d_if_planar, read_points_ply, write_estimate_urdf, write_mesh, write_points_ply
+from explore3d.world.objects import load_object
 
 
 @pytest.mark.parametrize("name", ["cube", "l_block"])
@@ -56,7 +55,7 @@ def default_size_estimate():
     from scipy.spatial import cKDTree
 
     from explore3d import ExploreConfig, run
-    from explore3d.pipeline import hull_input_mask
+    from explore3d.reconstruction.hull_input import hull_input_mask
 
     res = run(load_object("cube"), "default", ExploreConfig(jobs=2))
     ex = res.exploration
@@ -78,7 +77,7 @@ def near_coincident_points(seed: int = 0) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def near_coincident_estimate():
-    from explore3d.hull import inverse_hull
+    from explore3d.geometry.hull import inverse_hull
 
     m = inverse_hull(near_coincident_points(), centre=np.zeros(3)).mesh
     return m, m.volume
@@ -154,8 +153,8 @@ def test_points_closer_than_a_micrometre_are_merged_before_the_hull():
     closer than that (the cause of the non-manifold exports)."""
     from scipy.spatial import cKDTree
 
-    from explore3d.hull import inverse_hull, merge_close_points
-    from explore3d.tolerances import MERGE_DISTANCE_M
+    from explore3d.geometry.hull import inverse_hull, merge_close_points
+    from explore3d.core.tolerances import MERGE_DISTANCE_M
 
     P = near_coincident_points()
     rep = merge_close_points(P)
@@ -178,7 +177,7 @@ def _load_urdf(urdf):
     would place it; mass (kg) and principal moments of inertia (3,) (kg m^2) loaded with the
     URDF's own inertia (``URDF_USE_INERTIA_FROM_FILE``: PyBullet otherwise computes one from the
     collision shape; the rotated inertial frame then also inflates the AABB)."""
-    from explore3d._quiet import quiet_c_output
+    from explore3d.core.quiet import quiet_c_output
 
     with quiet_c_output():
         import pybullet as p
@@ -246,7 +245,7 @@ def test_estimate_urdf_loads_with_the_mesh_bounds_and_its_mass(tmp_path, default
     Bullet's integer hull computer, whose cells may pull an extreme in by up to 1/10216 of the
     extent (:func:`_bullet_hull_bounds`; measured on this branch's 4-wrap estimate: 8.85 um at both
     z ends, exactly as emulated); its AABB is compared with that hull's bounds."""
-    from explore3d.export import DEFAULT_DENSITY_KG_M3
+    from explore3d.app.export import DEFAULT_DENSITY_KG_M3
 
     mesh, _ = default_arm_estimate
     mesh = mesh.copy()
@@ -271,8 +270,8 @@ def test_estimate_urdf_loads_with_the_mesh_bounds_and_its_mass(tmp_path, default
 
 
 def test_estimate_urdf_default_density_and_bad_input(tmp_path):
-    from explore3d.cli import DEFAULT_DENSITY_KG_M3 as CLI_DENSITY
-    from explore3d.export import DEFAULT_DENSITY_KG_M3
+    from explore3d.app.cli import DEFAULT_DENSITY_KG_M3 as CLI_DENSITY
+    from explore3d.app.export import DEFAULT_DENSITY_KG_M3
 
     mesh = load_object("box")
     write_mesh(mesh, tmp_path / "e.obj")
@@ -335,7 +334,7 @@ def test_read_points_other_files(tmp_path):
         read_points_ply(tmp_path / "text.ply")
 
 
-# --- pictures (explore3d.pictures; no simulation needed) ------------------------------------------
+# --- pictures (explore3d.app.pictures; no simulation needed) ------------------------------------------
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -343,9 +342,9 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 def test_3d_pictures_are_pngs(tmp_path):
     import types
 
-    from explore3d import pictures
-    from explore3d.arm import ArmSpec
-    from explore3d.metrics import shape_error
+    from explore3d.app import pictures
+    from explore3d.arm.spec import ArmSpec
+    from explore3d.geometry.metrics import shape_error
 
     truth = load_object("cube")
     est = load_object("sphere")

@@ -1,14 +1,14 @@
-"""Free space, carving and probe targets: geometric facts (explore3d.freespace, .carve, .active)."""
+"""Free space, carving and probe targets: geometric facts (explore3d.reconstruction.freespace, .carve, .active)."""
 import numpy as np
 import pytest
 import trimesh
 from shapely.geometry import Point, Polygon
 
-from explore3d.active import ProbeConfig, probe_poses, unsupported_targets
-from explore3d.arm import ArmSpec
-from explore3d.carve import carve
-from explore3d.freespace import SweptArea, is_free, load_swept, save_swept, swept_area
-from explore3d.kinematics import link_transforms
+from explore3d.strategy.active import ProbeConfig, probe_poses, unsupported_targets
+from explore3d.arm.spec import ArmSpec
+from explore3d.reconstruction.carve import carve
+from explore3d.reconstruction.freespace import SweptArea, is_free, load_swept, save_swept, swept_area
+from explore3d.arm.kinematics import link_transforms
 
 SMALL = ArmSpec(name="small16", n_links=16, link_length=0.02)
 
@@ -124,10 +124,10 @@ def test_finger_lies_alongside_the_slot_wall_in_empty_space_and_curls_onto_it():
     """The U-channel as the estimate, a target on a slot wall: the finger's straight arm (link
     cross-section plus the gap) lies outside the estimate, its base outside the rough bound, the
     arm runs along the wall and curls towards it; a target on the wall of a closed pocket gets none."""
-    from explore3d.active import finger_poses
-    from explore3d.arm import load_arm
-    from explore3d.kinematics import link_transforms
-    from explore3d.objects import u_channel
+    from explore3d.strategy.active import finger_poses
+    from explore3d.arm.urdf import load_arm
+    from explore3d.arm.kinematics import link_transforms
+    from explore3d.world.objects import u_channel
 
     spec = load_arm("default")
     u = u_channel()  # slot x in [-20, 20] mm, open towards +y, along z
@@ -163,8 +163,9 @@ def test_probe_config_rejects_bad_values():
 def test_the_swept_space_of_a_real_exploration_never_holds_the_object():
     """Wraps around the cube in PyBullet: no point inside the cube is free, yet the swept space
     reaches to within a couple of millimetres of its faces."""
-    from explore3d.explore import ExploreConfig, explore
-    from explore3d.objects import cube
+    from explore3d.strategy.explore import ExploreConfig
+    from explore3d.world.explore import explore
+    from explore3d.world.objects import cube
 
     m = cube()
     ex = explore(m, SMALL, ExploreConfig(directions=4, angles=1, jobs=1, probes=None))

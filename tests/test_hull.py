@@ -1,4 +1,4 @@
-"""Tests of explore3d.hull: known answers, convergence in a, rigid-motion invariance, the
+"""Tests of explore3d.geometry.hull: known answers, convergence in a, rigid-motion invariance, the
 literal formula's outer hull, star-shapedness, backend agreement and input validation."""
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ import trimesh
 from scipy.spatial import ConvexHull, QhullError
 from scipy.spatial.transform import Rotation
 
-import explore3d.hull as hull_mod
-from explore3d.hull import InverseHull, default_radius, inverse_hull, invert_points
-from explore3d.tolerances import FLOAT64_GEOMETRY_RTOL, INVERSE_HULL_VOLUME_RTOL
+import explore3d.geometry.hull as hull_mod
+from explore3d.geometry.hull import InverseHull, default_radius, inverse_hull, invert_points
+from explore3d.core.tolerances import FLOAT64_GEOMETRY_RTOL, INVERSE_HULL_VOLUME_RTOL
 
 CUBE_SIDE_M = 0.08
 SPHERE_RADIUS_M = 0.05
@@ -260,7 +260,7 @@ def test_import_without_open3d_and_backend_error_names_fix():
         import sys
         sys.modules["open3d"] = None  # any `import open3d` now raises ImportError
         import numpy as np
-        import explore3d.hull as h
+        import explore3d.geometry.hull as h
         pts = np.random.default_rng(0).normal(size=(50, 3))
         assert len(h.inverse_hull(pts).vertices) > 0
         try:

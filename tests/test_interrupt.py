@@ -1,5 +1,5 @@
 """Interrupted, killed or failed: ``explore3d run`` says one line and its output folder holds one
-run's complete set of files or none (explore3d.io.StagedFolder, explore3d._interrupt).
+run's complete set of files or none (explore3d.core.io.StagedFolder, explore3d.core.interrupt).
 
 The runs are real command-line processes (``python -m explore3d``) in a session of their own, so
 Ctrl-C is sent as a terminal sends it: SIGINT to the whole process group, the workers included.
@@ -16,8 +16,8 @@ from pathlib import Path
 import psutil
 import pytest
 
-from explore3d.io import STAGING_PREFIX
-from explore3d.pipeline import RUN_FILES, WRITE_PAUSE_ENV
+from explore3d.core.io import STAGING_PREFIX
+from explore3d.app.pipeline import RUN_FILES, WRITE_PAUSE_ENV
 
 REPO = str(Path(__file__).resolve().parents[1])
 
@@ -171,7 +171,7 @@ def test_interrupt_during_an_optional_import_is_not_a_missing_package(tmp_path):
 def test_import_optional_reraises_an_interrupt_in_the_import_error_chain(tmp_path, monkeypatch):
     """Library use (no command-line handler): an ImportError whose cause or context is a
     KeyboardInterrupt is re-raised as KeyboardInterrupt; a plain ImportError stays one."""
-    from explore3d._interrupt import import_optional
+    from explore3d.core.interrupt import import_optional
 
     for name, body in [("e3d_fake_cause", "try:\n    raise KeyboardInterrupt\nexcept KeyboardInterrupt as e:\n"
                                           "    raise ImportError('load failed') from e\n"),
@@ -255,9 +255,9 @@ def test_a_failed_run_leaves_no_estimate_of_an_earlier_run(tmp_path, earlier_run
 def test_a_switch_killed_at_any_step_is_finished_by_the_next_run(tmp_path, monkeypatch, kill_after):
     """The switch of a folder to a new set, killed after ``kill_after`` of its moves (os.replace made
     to fail there, as a SIGKILL would stop it): the folder then has a report.json only beside one
-    complete set, and the next run's cleaning (explore3d.io.stale_leftovers) finishes the switch:
+    complete set, and the next run's cleaning (explore3d.core.io.stale_leftovers) finishes the switch:
     exactly the new set, the earlier run's other files gone, no staging folder left."""
-    from explore3d import io
+    from explore3d.core import io
 
     out = tmp_path / "o"
     out.mkdir()
@@ -299,8 +299,8 @@ def test_a_switch_killed_at_any_step_is_finished_by_the_next_run(tmp_path, monke
 def test_main_clears_its_interrupt_flag(monkeypatch):
     """An interrupted in-process ``main`` (Ctrl-C in a notebook) leaves no flag behind: library calls
     afterwards are not taken for interrupted (check_interrupt passes)."""
-    from explore3d import cli
-    from explore3d._interrupt import INTERRUPTED, check_interrupt
+    from explore3d.app import cli
+    from explore3d.core.interrupt import INTERRUPTED, check_interrupt
 
     def interrupted(args):
         os.kill(os.getpid(), signal.SIGINT)  # through the command line's handler, as a real Ctrl-C

@@ -1,10 +1,10 @@
-"""Contact localisation from joint torques (explore3d.localise) on synthetic contacts."""
+"""Contact localisation from joint torques (explore3d.feeling.localise) on synthetic contacts."""
 import numpy as np
 import pytest
 
-from explore3d.arm import DEFAULT_ARM
-from explore3d.kinematics import link_transforms, point_jacobian
-from explore3d.localise import external_torques, localise
+from explore3d.arm.spec import DEFAULT_ARM
+from explore3d.arm.kinematics import link_transforms, point_jacobian
+from explore3d.feeling.localise import external_torques, localise
 
 SPEC = DEFAULT_ARM
 
@@ -89,7 +89,7 @@ def test_corner_contact_oblique_force():
 
 
 def test_external_torques_cancels_gravity():
-    from explore3d.kinematics import gravity_torques
+    from explore3d.arm.kinematics import gravity_torques
 
     q, T = _config(1), _base(1)
     g = np.array([0.0, 0.0, -9.81])

@@ -1,4 +1,4 @@
-"""Tests of explore3d.metrics: exact areas and volumes, agreement with shapely, rigid-motion
+"""Tests of explore3d.geometry.metrics: exact areas and volumes, agreement with shapely, rigid-motion
 invariance, identity, closed-volume checks and determinism."""
 from __future__ import annotations
 
@@ -9,17 +9,9 @@ from scipy.spatial.transform import Rotation
 from shapely import affinity
 from shapely.geometry import Point, Polygon, box
 
-from explore3d.hull import inverse_hull
-from explore3d.metrics import (
-    NotAVolumeError,
-    ShapeError,
-    area_error,
-    boundary_samples,
-    check_volume,
-    shape_error,
-    volume_error,
-)
-from explore3d.tolerances import FLOAT64_GEOMETRY_RTOL
+from explore3d.geometry.hull import inverse_hull
+from explore3d.geometry.metrics import NotAVolumeError, ShapeError, area_error, boundary_samples, check_volume, shape_error, volume_error
+from explore3d.core.tolerances import FLOAT64_GEOMETRY_RTOL
 
 
 def rigid_mesh(mesh: trimesh.Trimesh, R: np.ndarray, t: np.ndarray) -> trimesh.Trimesh:
@@ -191,7 +183,7 @@ def test_inverted_mesh_raises_not_a_volume():
 def test_a_shape_against_itself_is_exactly_zero_error_and_iou_one(seed):
     """Error >= 0 and IoU <= 1 always: before the clamp, ``shape_error(x, x)`` gave -4e-16 error and
     IoU 1 + 4e-16 in most 3D cases (the boolean's and trimesh's volume sums round differently)."""
-    from explore3d.objects import BUILTIN_OBJECTS, load_object
+    from explore3d.world.objects import BUILTIN_OBJECTS, load_object
 
     rng = np.random.default_rng(seed)
     names = sorted(BUILTIN_OBJECTS)

@@ -1,4 +1,4 @@
-"""Tests for explore3d.objects: geometric facts about the built-ins, and load_object's contract."""
+"""Tests for explore3d.world.objects: geometric facts about the built-ins, and load_object's contract."""
 from __future__ import annotations
 
 import logging
@@ -7,18 +7,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from explore3d import objects
-from explore3d.objects import (
-    BUILTIN_OBJECTS,
-    MeshError,
-    builtin_object_names,
-    cross_section,
-    load_object,
-    object_size,
-    regular_polygon,
-    square,
-)
-from explore3d.tolerances import STL_FLOAT32_RTOL
+from explore3d.world import objects
+from explore3d.world.objects import BUILTIN_OBJECTS, MeshError, builtin_object_names, cross_section, load_object, object_size, regular_polygon, square
+from explore3d.core.tolerances import STL_FLOAT32_RTOL
 
 REQUIRED = {"cube", "cylinder", "sphere", "box", "capsule", "cone", "l_block", "u_channel", "star_prism"}
 CONCAVE = {"l_block", "u_channel", "star_prism"}
@@ -212,7 +203,7 @@ def test_file_round_trip(tmp_path, ext, caplog):
     ref = objects.l_block()
     path = tmp_path / f"l_block.{ext}"
     ref.export(path)
-    with caplog.at_level(logging.WARNING, logger="explore3d.objects"):
+    with caplog.at_level(logging.WARNING, logger="explore3d.world.objects"):
         mesh = load_object(path)
     assert mesh.volume == pytest.approx(ref.volume, rel=STL_FLOAT32_RTOL)
     assert np.allclose(mesh.bounds, ref.bounds, atol=1e-7)
@@ -245,7 +236,7 @@ def test_size_sets_longest_side(size):
 
 
 def test_pybullet_data_prefix(caplog):
-    with caplog.at_level(logging.WARNING, logger="explore3d.objects"):
+    with caplog.at_level(logging.WARNING, logger="explore3d.world.objects"):
         mesh = load_object("pybullet_data:cube.obj")
     # pybullet's cube.obj is a 1 m cube whose vertices are split per face by the texture
     # coordinates; merging them closes it
@@ -301,7 +292,7 @@ def test_flipped_faces_are_repaired_with_warning(tmp_path, caplog):
     faces = ref.faces.copy()
     faces[[0, 5, 7]] = faces[[0, 5, 7]][:, ::-1]
     path = _write(tmp_path, "flipped.stl", trimesh.Trimesh(ref.vertices, faces, process=False))
-    with caplog.at_level(logging.WARNING, logger="explore3d.objects"):
+    with caplog.at_level(logging.WARNING, logger="explore3d.world.objects"):
         mesh = load_object(path)
     assert mesh.is_winding_consistent and mesh.is_watertight
     assert mesh.volume == pytest.approx(ref.volume, rel=STL_FLOAT32_RTOL)
@@ -314,7 +305,7 @@ def test_inside_out_mesh_is_repaired(tmp_path, caplog):
     inv = ref.copy()
     inv.invert()
     path = _write(tmp_path, "inside_out.ply", inv)
-    with caplog.at_level(logging.WARNING, logger="explore3d.objects"):
+    with caplog.at_level(logging.WARNING, logger="explore3d.world.objects"):
         mesh = load_object(path)
     assert mesh.volume == pytest.approx(ref.volume, rel=STL_FLOAT32_RTOL)
     assert any("inside-out surface outward" in r.getMessage() for r in caplog.records)
@@ -323,7 +314,7 @@ def test_inside_out_mesh_is_repaired(tmp_path, caplog):
 def test_small_hole_is_filled(tmp_path, caplog):
     ref = objects.cube(0.08)
     path = _write(tmp_path, "holed.stl", trimesh.Trimesh(ref.vertices, ref.faces[1:], process=False))
-    with caplog.at_level(logging.WARNING, logger="explore3d.objects"):
+    with caplog.at_level(logging.WARNING, logger="explore3d.world.objects"):
         mesh = load_object(path)
     assert mesh.is_watertight
     assert mesh.volume == pytest.approx(ref.volume, rel=STL_FLOAT32_RTOL)

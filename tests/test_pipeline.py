@@ -12,9 +12,10 @@ import pytest
 import trimesh
 
 from explore3d import ArmSpec, ExploreConfig, NoContactError, ReconstructionError, load_arm, load_object, rough_bound, run
-from explore3d._quiet import PYBULLET_BANNERS
-from explore3d.objects import cross_section
-from explore3d.pipeline import planar_truth, within_bound
+from explore3d.core.quiet import PYBULLET_BANNERS
+from explore3d.world.objects import cross_section
+from explore3d.app.pipeline import planar_truth
+from explore3d.reconstruction.hull_input import within_bound
 
 #: 8 x 20 mm links (reach 0.16 m): a wrap in empty space takes a fraction of a second.
 TINY = ArmSpec(name="tiny8", n_links=8, link_length=0.02)
@@ -41,9 +42,9 @@ def test_no_contact_is_real_and_named():
 def test_an_object_far_too_big_for_the_arm_is_refused_before_any_wrap(monkeypatch):
     """A 3 m cube (rough radius 2.7 m) for an arm that reaches 0.16 m: refused up front, naming the
     fix (it used to explore a wrap that touched nothing first)."""
-    import explore3d.pipeline
+    import explore3d.app.pipeline
 
-    monkeypatch.setattr(explore3d.pipeline, "explore", lambda *a, **k: pytest.fail("explored"))
+    monkeypatch.setattr(explore3d.app.pipeline, "explore", lambda *a, **k: pytest.fail("explored"))
     with pytest.raises(ValueError) as info:
         run(load_object("cube", size=3.0), TINY, PLANAR1)
     msg = _one_line(str(info.value))
@@ -223,7 +224,7 @@ def _sphere_groups(n_groups=12, per=200, radius=0.05, seed=0):
 
 
 def test_angular_outliers_flags_points_deep_inside_and_nothing_on_a_clean_sphere():
-    from explore3d.pipeline import angular_outliers
+    from explore3d.reconstruction.hull_input import angular_outliers
 
     P, g = _sphere_groups()
     assert not angular_outliers(P, np.zeros(3), g).any()
@@ -242,7 +243,7 @@ def test_angular_outliers_flags_points_deep_inside_and_nothing_on_a_clean_sphere
 def test_angular_outliers_keeps_a_star_shaped_concave_outline():
     """A 5-pointed star (inner radius 0.4 x outer) sampled by several groups: concave, star-shaped
     about its centre, nothing dropped."""
-    from explore3d.pipeline import angular_outliers
+    from explore3d.reconstruction.hull_input import angular_outliers
 
     t = np.linspace(0, 2 * np.pi, 2000, endpoint=False)
     rad = 0.05 * (0.7 + 0.3 * np.cos(5 * t))  # 0.02 .. 0.05 m
@@ -252,7 +253,7 @@ def test_angular_outliers_keeps_a_star_shaped_concave_outline():
 
 
 def test_angular_outliers_points_without_other_wraps_are_kept():
-    from explore3d.pipeline import angular_outliers
+    from explore3d.reconstruction.hull_input import angular_outliers
 
     P = np.array([[0.05, 0.0], [0.01, 0.0], [0.0, 0.05]])
     assert not angular_outliers(P, np.zeros(2), np.zeros(3, dtype=int)).any()

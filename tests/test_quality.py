@@ -1,4 +1,4 @@
-"""explore3d.quality: the oracle measures themselves (known distances, penetrations, sampling
+"""explore3d.world.quality: the oracle measures themselves (known distances, penetrations, sampling
 bounds, PyBullet's mesh margin), and the contact quality of real runs of the default arm on the
 80 mm cube, with bounds set from measurements (see BENCHMARKS.md, "Contact quality and thickness
 calibration")."""
@@ -10,13 +10,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from explore3d.arm import load_arm
-from explore3d.explore import ExploreConfig, explore
-from explore3d.kinematics import link_transforms
-from explore3d.objects import load_object
-from explore3d.quality import FALSE_DETECTION_TOL_M, contact_gaps, contact_quality, detection_records, sweep_segments, swept_joints
-from explore3d.replay import replay_wrap
-from explore3d.sdf import BOX_FACES, PYBULLET_MESH_MARGIN_M, SignedDistance, box_min_distance, box_surface_points, face_min_distance
+from explore3d.arm.urdf import load_arm
+from explore3d.strategy.explore import ExploreConfig
+from explore3d.world.explore import explore
+from explore3d.arm.kinematics import link_transforms
+from explore3d.world.objects import load_object
+from explore3d.world.quality import FALSE_DETECTION_TOL_M, contact_gaps, contact_quality, detection_records, sweep_segments, swept_joints
+from explore3d.world.replay import replay_wrap
+from explore3d.geometry.sdf import BOX_FACES, PYBULLET_MESH_MARGIN_M, SignedDistance, box_min_distance, box_surface_points, face_min_distance
 
 SPEC = load_arm("default")
 HALF = 0.04  # half edge of the built-in 80 mm cube, metres
@@ -138,7 +139,8 @@ def test_pybullet_mesh_margin_is_what_the_constant_says(cube_sdf, margin):
     mesh's collision margin: the reason touching faces rest that far off the surface.  Its own
     default (``collision_margin=None``) is :data:`PYBULLET_MESH_MARGIN_M`; ``SimConfig.collision_margin``
     sets it (the default 0.3 mm)."""
-    from explore3d.sim import ArmSimulation, SimConfig
+    from explore3d.world.sim import ArmSimulation
+    from explore3d.core.settings import SimConfig
 
     expected = PYBULLET_MESH_MARGIN_M if margin is None else margin
     mesh = load_object("cube")

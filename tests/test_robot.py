@@ -12,14 +12,15 @@ import numpy as np
 import pybullet
 import pytest
 
-from explore3d.arm import ArmSpec
-from explore3d.band import cached_band
-from explore3d.encircle import ControlConfig, run_wrap
-from explore3d.kinematics import gravity_torques, point_jacobian
-from explore3d.objects import cube
-from explore3d.robot import LogMismatchError, LogRobot, RecordingRobot, Robot, RobotLog, make_command
-from explore3d.sensing import SensorConfig
-from explore3d.sim import ArmSimulation, SimConfig
+from explore3d.arm.spec import ArmSpec
+from explore3d.world.band import cached_band
+from explore3d.strategy.encircle import ControlConfig, run_wrap
+from explore3d.arm.kinematics import gravity_torques, point_jacobian
+from explore3d.world.objects import cube
+from explore3d.robot.interface import LogMismatchError, LogRobot, RecordingRobot, Robot, RobotLog, make_command
+from explore3d.robot.sensing import SensorConfig
+from explore3d.world.sim import ArmSimulation
+from explore3d.core.settings import SimConfig
 
 SMALL = ArmSpec(name="small12", n_links=12, link_length=0.025)
 ROOT = Path(__file__).resolve().parents[1]
@@ -157,7 +158,7 @@ def test_a_recorded_log_replays_to_the_same_detections(tmp_path):
     the controller takes the same decisions (a real robot's log in this format works the same way)."""
     band = cached_band(SMALL, planar=True)
     m = cube()
-    from explore3d.explore import ExploreConfig, wrap_poses, rough_bound
+    from explore3d.strategy.explore import ExploreConfig, wrap_poses, rough_bound
 
     c, r = rough_bound(m.vertices)
     pose = wrap_poses(SMALL, ExploreConfig(mode="planar", directions=1), c, r)[0]
@@ -191,7 +192,7 @@ def test_a_bad_log_file_is_a_one_line_error(tmp_path):
 
 
 def test_band_is_measured_for_every_joint_and_cached(tmp_path, monkeypatch):
-    from explore3d import band as band_mod
+    from explore3d.world import band as band_mod
 
     monkeypatch.setenv("EXPLORE3D_CACHE_DIR", str(tmp_path))
     arm = ArmSpec(name="tiny8", n_links=8, link_length=0.03)
@@ -225,11 +226,11 @@ ORACLE_FREE = textwrap.dedent("""
             delattr(pybullet, n)
     assert not any(hasattr(pybullet, n) for n in names)
     import numpy as np
-    from explore3d.arm import ArmSpec
-    from explore3d.active import ProbeConfig
-    from explore3d.explore import ExploreConfig
-    from explore3d.objects import cube
-    from explore3d.pipeline import run
+    from explore3d.arm.spec import ArmSpec
+    from explore3d.strategy.active import ProbeConfig
+    from explore3d.strategy.explore import ExploreConfig
+    from explore3d.world.objects import cube
+    from explore3d.app.pipeline import run
     arm = ArmSpec(name="small12", n_links=12, link_length=0.025)
     res = run(cube(), arm, ExploreConfig(directions=24, angles=1, jobs=2, record=True,
                                          probes=ProbeConfig(rounds=1, targets=2, fingers=2)))
@@ -240,7 +241,7 @@ ORACLE_FREE = textwrap.dedent("""
     assert len(ex.swept) == ex.n_wraps and res.carved is not None
     assert ex.n_contacts > 0 and ex.config.control.gravity_compensation and ex.logs is not None
     # the arm collided with itself and told it from the object by its own model: attempts ended so
-    from explore3d.encircle import StopReason
+    from explore3d.strategy.encircle import StopReason
     assert ex.config.sim.self_collision and ex.config.control.self_contact_action == "end"
     assert any(r is StopReason.SELF for w in ex.attempts for a in w for r in a.reasons)
     # the wraps' planes are tilted: gravity compensation actually ran (non-zero feed-forward)
@@ -249,8 +250,8 @@ ORACLE_FREE = textwrap.dedent("""
     assert ex.config.points == "contacts" and ex.contacts.used.sum() == len(ex.points) >= 4
     assert np.array_equal(ex.points, ex.contacts.points[ex.contacts.used])
     # the curl-back encirclement too: its hairpin moves between sweeps happened
-    from explore3d.encircle import CurlBack
-    from explore3d.explore import explore
+    from explore3d.strategy.encircle import CurlBack
+    from explore3d.strategy.explore import explore
     cb = explore(cube(), arm, ExploreConfig(directions=3, angles=1, jobs=2, record=True, probes=None,
                                             curl_back=CurlBack()))
     assert cb.n_contacts > 0 and any((a.trajectory_ref < -0.3).any() for w in cb.attempts for a in w)
@@ -274,10 +275,10 @@ def test_exploration_runs_with_every_world_query_removed_from_pybullet(tmp_path)
 ORACLE_FREE_TABLE = textwrap.dedent("""
     import pybullet
     import numpy as np
-    from explore3d.arm import ArmSpec
-    from explore3d.objects import cube
-    from explore3d.pipeline import run
-    from explore3d.scene import scene_explore_config, settle_scene
+    from explore3d.arm.spec import ArmSpec
+    from explore3d.world.objects import cube
+    from explore3d.app.pipeline import run
+    from explore3d.world.scene import scene_explore_config, settle_scene
     arm = ArmSpec(name="small12", n_links=12, link_length=0.025)
     cfg = scene_explore_config("table", table_heights=3, table_angles=3, directions=4, angles=1)
     m = cube(0.04)
@@ -323,9 +324,9 @@ def test_factory_bands_are_those_of_the_current_defaults():
     """The bands shipped in explore3d/data are exactly the built-in arms' default settings; a
     change of any default (or of the protocol or version) must regenerate them
     (``python scripts/make_bands.py``), or the first run would silently recalibrate."""
-    from explore3d.arm import load_arm
-    from explore3d.band import FACTORY_SETTINGS, band_cache_key, factory_band_path
-    from explore3d.sim import SimConfig
+    from explore3d.arm.urdf import load_arm
+    from explore3d.world.band import FACTORY_SETTINGS, band_cache_key, factory_band_path
+    from explore3d.core.settings import SimConfig
 
     keys = {band_cache_key(load_arm(a), ControlConfig(), SimConfig(), SensorConfig(), p) for a, p in FACTORY_SETTINGS}
     shipped = {p.stem.removeprefix("band-") for p in factory_band_path("x").parent.glob("band-*.json")}
@@ -335,9 +336,9 @@ def test_factory_bands_are_those_of_the_current_defaults():
 def test_factory_band_is_what_the_calibration_measures(monkeypatch, tmp_path):
     """The paper arm's shipped planar band equals a fresh calibration on this code (bit for bit:
     the calibration is deterministic), and cached_band reads it without calibrating."""
-    from explore3d import band as band_mod
-    from explore3d.arm import load_arm
-    from explore3d.sim import SimConfig
+    from explore3d.world import band as band_mod
+    from explore3d.arm.urdf import load_arm
+    from explore3d.core.settings import SimConfig
 
     spec = load_arm("paper")
     fresh = band_mod.calibrate_band(spec, ControlConfig(), SimConfig(), SensorConfig(), planar=True)

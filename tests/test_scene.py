@@ -7,18 +7,21 @@ import numpy as np
 import pytest
 import trimesh
 
-from explore3d.arm import ArmSpec, load_arm
-from explore3d.directions import table_wrap_poses
-from explore3d.encircle import ControlConfig, run_wrap
-from explore3d.explore import ExploreConfig, wrap_poses
-from explore3d.freespace import swept_area
-from explore3d.kinematics import link_transforms
-from explore3d.motion import deep_free, moved_after
-from explore3d.objects import cube
-from explore3d.scene import SceneConfig, pose_drift, scene_explore_config, settle_scene, object_pose
-from explore3d.sim import ArmSimulation, SimConfig
-from explore3d.tabletop import cut_at_table, support_points
-from explore3d.workspace import base_lowest_z, floor_stop, link_corners, lowest_z, plan_lowest_z, pose_clears
+from explore3d.arm.spec import ArmSpec
+from explore3d.arm.urdf import load_arm
+from explore3d.geometry.directions import table_wrap_poses
+from explore3d.strategy.encircle import ControlConfig, run_wrap
+from explore3d.strategy.explore import ExploreConfig, wrap_poses
+from explore3d.reconstruction.freespace import swept_area
+from explore3d.arm.kinematics import link_transforms
+from explore3d.strategy.motion import deep_free, moved_after
+from explore3d.world.objects import cube
+from explore3d.core.settings import SceneConfig
+from explore3d.world.scene import pose_drift, scene_explore_config, settle_scene, object_pose
+from explore3d.world.sim import ArmSimulation
+from explore3d.core.settings import SimConfig
+from explore3d.reconstruction.tabletop import cut_at_table, support_points
+from explore3d.arm.workspace import base_lowest_z, floor_stop, link_corners, lowest_z, plan_lowest_z, pose_clears
 
 DEFAULT = load_arm("default")
 
@@ -99,7 +102,7 @@ def test_table_wraps_start_above_the_table_and_include_tilted_ones():
 def test_no_wrap_plan_passes_below_the_table():
     """The commanded references of real wraps (horizontal and tilted), by the arm's model: every link
     stays above the table, checked from the plan (the references sent), not from PyBullet."""
-    from explore3d.band import cached_band
+    from explore3d.world.band import cached_band
 
     m = cube()
     sc = SceneConfig(table=True)  # a fixed object on the table: the plan is what is checked
@@ -212,8 +215,8 @@ SMALL = ArmSpec(name="small12", n_links=12, link_length=0.025)
 
 
 def _small_table_run(density):
-    from explore3d.explore import explore
-    from explore3d.scene import SceneWatch
+    from explore3d.world.explore import explore
+    from explore3d.world.scene import SceneWatch
 
     cfg = scene_explore_config("table", table_heights=1, table_angles=6, directions=1)
     cfg = dataclasses.replace(cfg, scene=dataclasses.replace(cfg.scene, density=density))

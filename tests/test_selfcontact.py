@@ -1,21 +1,22 @@
 """The arm touching itself: PyBullet's self-collision, the kinematic self-distance
-(explore3d.selfcontact) against PyBullet's own geometry, and self-contacts never taken for the
+(explore3d.arm.selfcontact) against PyBullet's own geometry, and self-contacts never taken for the
 object's (the localisation's flag; the controller's part is in tests/test_encircle.py)."""
 import math
 
 import numpy as np
 import pytest
 
-from explore3d.arm import ArmSpec, load_arm
-from explore3d.contacts import contacts_for_hull, localise_attempts
-from explore3d.encircle import Attempt, Moment
-from explore3d.explore import ExploreConfig
-from explore3d.localise import torques_of_contacts
-from explore3d.robot import JointReading, make_command
-from explore3d.selfcontact import (SELF_CONTACT_TOLERANCE_M, near_other_body, point_body_distances,
-                                   rectangle_distances, self_contact_pairs, self_distances)
-from explore3d.sensing import SensorConfig
-from explore3d.sim import ArmSimulation, SimConfig
+from explore3d.arm.spec import ArmSpec
+from explore3d.arm.urdf import load_arm
+from explore3d.feeling.contacts import contacts_for_hull, localise_attempts
+from explore3d.strategy.encircle import Attempt, Moment
+from explore3d.strategy.explore import ExploreConfig
+from explore3d.feeling.localise import torques_of_contacts
+from explore3d.robot.interface import JointReading, make_command
+from explore3d.arm.selfcontact import SELF_CONTACT_TOLERANCE_M, near_other_body, point_body_distances, rectangle_distances, self_contact_pairs, self_distances
+from explore3d.robot.sensing import SensorConfig
+from explore3d.world.sim import ArmSimulation
+from explore3d.core.settings import SimConfig
 
 #: Small arms keep these fast; the second has wide links and a large base block.
 SMALL = ArmSpec(name="small8", n_links=8, link_length=0.02)
@@ -179,7 +180,7 @@ def test_a_contact_on_the_base_block_is_a_self_contact_and_never_hulled():
     b = spec.base_size
     corner = np.array([-b - 0.001, b / 2, 0.0])
     assert point_body_distances(spec, q, [corner])[0, 2] < 1e-9
-    from explore3d.kinematics import link_transforms
+    from explore3d.arm.kinematics import link_transforms
 
     T1 = link_transforms(spec, q)[1]
     p_link = (np.linalg.inv(T1) @ np.append(corner, 1.0))[:3]
@@ -208,8 +209,8 @@ def test_a_contact_on_the_base_block_is_a_self_contact_and_never_hulled():
 def test_band_calibration_learns_no_signal_of_the_arm_touching_itself(monkeypatch):
     """The impact wraps of the calibration curl the 16-link arm round the known block until it
     touches itself (PyBullet reports arm-arm contacts); no step at which it does feeds a band."""
-    from explore3d import band as band_mod
-    from explore3d import sim as sim_mod
+    from explore3d.world import band as band_mod
+    from explore3d.world import sim as sim_mod
 
     spec = ArmSpec(name="small16", n_links=16, link_length=0.02)
     worlds = []

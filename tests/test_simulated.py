@@ -1,4 +1,4 @@
-"""Tests for explore3d.simulated: link placement facts and the paper's simulated-cube result."""
+"""Tests for explore3d.world.simulated: link placement facts and the paper's simulated-cube result."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,9 +7,9 @@ import shapely
 import trimesh
 from shapely.geometry import MultiPolygon
 
-from explore3d import objects
-from explore3d.simulated import discretise_links, random_links_on_boundary, simulated_case
-from explore3d.tolerances import SURFACE_ATOL_M
+from explore3d.world import objects
+from explore3d.world.simulated import discretise_links, random_links_on_boundary, simulated_case
+from explore3d.core.tolerances import SURFACE_ATOL_M
 
 L = 0.008  # the paper's simulated link length, metres
 SEEDS = range(10)

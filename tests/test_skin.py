@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from explore3d import ArmSpec, ExploreConfig, load_object, run
-from explore3d.compare import compare, format_compare
-from explore3d.sdf import SignedDistance
-from explore3d.skin import ideal_skin, surface_coverage
+from explore3d.app.compare import compare, format_compare
+from explore3d.geometry.sdf import SignedDistance
+from explore3d.world.skin import ideal_skin, surface_coverage
 
 SMALL = ArmSpec(name="small16", n_links=16, link_length=0.02)
 
@@ -80,7 +80,7 @@ def test_localised_contacts_and_the_skin_beat_the_link_points_on_the_same_sweeps
 
 
 def test_compare_command_prints_columns_and_json(capsys):
-    from explore3d.cli import main
+    from explore3d.app.cli import main
 
     args = ["compare", "cube", "--arm", "paper", "--mode", "planar", "--directions", "2", "--attempts", "1"]
     assert main(args) == 0

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from scipy.optimize import nnls
 
-from explore3d.arm import load_arm
-from explore3d.directions import spatial_wrap_poses
-from explore3d.kinematics import gravity_torques, link_transforms
-from explore3d.localise import _nnls
+from explore3d.arm.urdf import load_arm
+from explore3d.geometry.directions import spatial_wrap_poses
+from explore3d.arm.kinematics import gravity_torques, link_transforms
+from explore3d.feeling.localise import _nnls
 
 
 def _gravity_torques_general(spec, q, T_world_base, gravity):

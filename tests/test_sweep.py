@@ -1,4 +1,4 @@
-"""Tests of explore3d.sweep and explore3d.sweep_report (``explore3d sweep``, ``explore3d sweep-report``).
+"""Tests of explore3d.app.sweep and explore3d.app.sweep_report (``explore3d sweep``, ``explore3d sweep-report``).
 
 The simulated sweeps use the small 16-link arm in planar mode (3 directions: a few seconds a run):
 2 objects (a built-in and a mesh file found by a glob) x 2 values of ``a``."""
@@ -16,9 +16,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from explore3d.cli import main
-from explore3d.sweep import (DB_NAME, SWEEP_KEYS, TIMING_COLUMNS, RunTask, execute, mesh_sha256, parse_grid,
-                             read_grid_file, read_rows, resolve_objects, run_sweep, settings_grid, sweep_tasks)
+from explore3d.app.cli import main
+from explore3d.app.sweep import DB_NAME, SWEEP_KEYS, TIMING_COLUMNS, RunTask, execute, mesh_sha256, parse_grid, read_grid_file, read_rows, resolve_objects, run_sweep, settings_grid, sweep_tasks
 
 ROOT = Path(__file__).resolve().parents[1]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -260,8 +259,8 @@ def test_sweep_report(reference, tmp_path, capsys):
 # --- the signed-distance picture ----------------------------------------------------------------
 
 def test_signed_distance_sign_and_figure(tmp_path):
-    from explore3d.objects import load_object, square
-    from explore3d.pictures import signed_distance_figure, signed_distance_mm
+    from explore3d.world.objects import load_object, square
+    from explore3d.app.pictures import signed_distance_figure, signed_distance_mm
 
     cube = load_object("cube")  # 80 mm
     big, small = cube.copy(), cube.copy()

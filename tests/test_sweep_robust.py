@@ -19,9 +19,8 @@ import psutil
 import pytest
 import trimesh
 
-from explore3d.cli import main
-from explore3d.sweep import (DB_NAME, LOCK_NAME, LOST, SweepDatabaseError, SweepStore, _COLUMNS, _exit_outcome,
-                             read_rows, run_sweep)
+from explore3d.app.cli import main
+from explore3d.app.sweep import DB_NAME, LOCK_NAME, LOST, SweepDatabaseError, SweepStore, _COLUMNS, _exit_outcome, read_rows, run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 

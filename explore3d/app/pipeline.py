@@ -1,0 +1,654 @@
+"""Explore, reconstruct and score in one call: the library's main entry point.
+
+``reconstruct_exploration`` uses only what the robot knows: the link surface points, the rough
+centre it was told (as the inversion centre) and the rough bounding radius (points beyond it
+cannot lie on the object and are dropped).  Scoring against the true shape happens afterwards.
+The command line's ``explore3d run`` calls :func:`run`, so both give the same estimate for the
+same configuration.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from explore3d.core.defaults import DEFAULT_A
+from explore3d.strategy.explore import Exploration, ExploreConfig, rough_bound
+from explore3d.world.explore import explore
+from explore3d.app.export import DEFAULT_DENSITY_KG_M3
+from explore3d.reconstruction.hull_input import OUTLIER_RATIO, angular_outliers, hull_input_mask, reconstruct_points, within_bound
+
+
+@dataclass(frozen=True)
+class Result:
+    """An exploration, its reconstruction and its score.
+
+    Attributes:
+        exploration: what the arm gathered.
+        hull: the :class:`~explore3d.geometry.hull.InverseHull` (2D planar, 3D otherwise), world frame.
+        truth: the true shape (shapely Polygon planar, trimesh 3D), world frame.
+        error: :class:`~explore3d.geometry.metrics.ShapeError` of ``hull`` against ``truth``.
+        centre: (3,) the robot's rough centre, world frame, metres (the inversion centre; planar
+            runs use its x-y components and cut the truth at its z).
+        radius: the robot's rough bounding radius, metres: points farther than this from
+            ``centre`` were dropped before the hull.
+        n_points_used: how many of ``exploration.points`` the hull was built from (within ``radius``,
+            not angular outliers: :func:`hull_input_mask`).
+        carved: 3D runs with free space (``ExploreConfig.free_space``): the
+            :class:`~explore3d.reconstruction.carve.CarveResult` of cutting the swept free space out of the hull,
+            whose mesh is the estimate; else None (the estimate is the hull).
+        cut: on a table, the estimate cut at the table's plane
+            (:func:`explore3d.reconstruction.tabletop.cut_at_table`); else None.
+        setup: the settled scene (:class:`explore3d.world.scene.SceneSetup`) of a scene other than the
+            ideal one, else None; ``truth`` is then the object as it rested.
+    """
+
+    exploration: Exploration
+    hull: object
+    truth: object
+    error: object
+    centre: np.ndarray
+    radius: float = math.nan
+    n_points_used: int = -1
+    carved: object | None = None
+    cut: object | None = None
+    setup: object | None = None
+
+    @property
+    def estimate(self):
+        """The reconstructed shape: shapely Polygon (planar) or closed trimesh (3D: the hull, carved
+        by the swept free space when there is some, cut at the table's plane on a table), world
+        frame, metres."""
+        if self.cut is not None:
+            return self.cut
+        return self.hull.shape() if self.carved is None else self.carved.mesh
+
+    def summary(self) -> dict:
+        """The figures of a run as a JSON-ready dict: :func:`exploration_summary`, ``n_points_used``,
+        ``percent_error``, ``iou``, ``chamfer_m``, ``hausdorff_m``, ``true_size``, ``estimate_size``
+        (m^2 planar, m^3 3D; ``size_unit``), ``centre_m`` and ``radius_m`` (the rough bound), and
+        ``estimate_convex_hull``: the estimate's convex hull ``size`` (m^2 / m^3) and ``centre_m``
+        (its centroid, world frame), what a grasp planner takes as the object's extent; carved runs
+        add ``carved_m3``, ``hull_m3`` and ``dropped_pieces_m3`` (the slivers the carving left
+        beside the estimate's body, dropped: :func:`explore3d.geometry.bodies.one_body`)."""
+        e = self.error
+        est = self.estimate
+        if e.dim == 2:
+            ch = est.convex_hull
+            hull = {"size": float(ch.area), "centre_m": [float(ch.centroid.x), float(ch.centroid.y)]}
+        else:
+            ch = est.convex_hull
+            hull = {"size": float(ch.volume), "centre_m": [float(x) for x in ch.center_mass]}
+        carved = {} if self.carved is None else {"carved_m3": float(self.carved.carved_m3),
+                                                 "hull_m3": float(self.hull.mesh.volume),
+                                                 "dropped_pieces_m3": list(self.carved.dropped_m3)}
+        return {**exploration_summary(self.exploration), "n_points_used": self.n_points_used,
+                "estimate_convex_hull": hull, **carved,
+                "percent_error": e.percent, "iou": e.iou, "chamfer_m": e.chamfer_m, "hausdorff_m": e.hausdorff_m,
+                "true_size": e.true_size, "estimate_size": e.estimate_size,
+                "size_unit": "m^2" if e.dim == 2 else "m^3",
+                "centre_m": [float(x) for x in self.centre], "radius_m": float(self.radius)}
+
+
+def exploration_summary(ex: Exploration) -> dict:
+    """``n_wraps``, ``n_points``, ``n_contacts``, ``wall_s``, ``sim_s`` and ``steps`` of an exploration."""
+    return {"n_wraps": ex.n_wraps, "n_points": int(len(ex.points)), "n_contacts": ex.n_contacts,
+            "wall_s": float(ex.wall_s), "sim_s": float(ex.sim_time_s), "steps": int(ex.steps)}
+
+
+def table_contacts(ex: Exploration) -> int:
+    """How many of the exploration's localised contacts lay at the table (at most the scene's
+    clearance above its known height) and were left out of the hull; 0 without a table."""
+    if ex.table_z is None or ex.contacts is None or not len(ex.contacts):
+        return 0
+    return int(((ex.contacts.points[:, 2] <= ex.config.floor_z(ex.table_z)) & ~ex.contacts.self_contact).sum())
+
+
+def sensed_z_band(ex: Exploration) -> tuple[float, float]:
+    """The heights (z_lo, z_hi), world frame, metres, that a planar exploration's links swept: the
+    arm planes' z (of the wrap base poses) +- half the link height.  All the robot sensed of the
+    object's height; planar estimates are extruded over it, never over the true mesh's height."""
+    z = np.array([float(np.asarray(p.T_world_base)[2, 3]) for p in ex.poses])
+    h = 0.5 * float(ex.spec.link_height)
+    return float(z.min()) - h, float(z.max()) + h
+
+
+def extrusion_band(ex: Exploration, height: float | None = None) -> tuple[float, float]:
+    """(z_lo, z_hi), world frame, metres, over which a planar estimate is extruded: the arm's
+    :func:`sensed_z_band`, or ``height`` metres centred on it when given."""
+    zlo, zhi = sensed_z_band(ex)
+    if height is None:
+        return zlo, zhi
+    from explore3d.core.validate import check_positive
+
+    h = check_positive(height, "height (the extrusion height of a planar estimate, metres)")
+    zc = 0.5 * (zlo + zhi)
+    return zc - 0.5 * h, zc + 0.5 * h
+
+
+def estimate_mesh(result: Result, height: float | None = None):
+    """The estimate as a closed trimesh, world frame, metres.  3D: the inverse hull's mesh.
+    Planar: the polygon extruded over :func:`extrusion_band` (the arm's sensed height band, or
+    ``height`` metres centred on the arm's plane: the user's own knowledge of the object)."""
+    import trimesh
+
+    est = result.estimate
+    if result.exploration.config.mode != "planar":
+        return est
+    zlo, zhi = extrusion_band(result.exploration, height)
+    m = trimesh.creation.extrude_polygon(est, zhi - zlo)
+    m.apply_translation([0.0, 0.0, zlo])
+    return m
+
+
+def write_exploration_points(ex: Exploration, path):
+    """Write ``ex.points`` as PLY with their wrap, attempt and link, and, when they are localised
+    contacts, the :data:`~explore3d.app.export.CONTACT_PROPERTIES` of each (same order)."""
+    from explore3d.app.export import contact_properties, write_points_ply
+
+    extra = None
+    if ex.config.points == "contacts" and ex.contacts is not None:
+        extra = contact_properties(ex.contacts.select(ex.contacts.used))
+    return write_points_ply(ex.points, path, ex.point_wrap, ex.point_attempt, ex.point_link, extra=extra)
+
+
+def write_result(result: Result, mesh, out, fmt: str = "obj", pictures: bool = True, *,
+                 density: float | None = None, height: float | None = None) -> list[str]:
+    """Write a run's files into folder ``out`` (created) and return their names:
+
+    * ``estimate.<fmt>`` (obj, stl, ply, off, glb): the estimate mesh (:func:`estimate_mesh`),
+      world frame, metres; one closed, outward-wound volume that reloads as such with the
+      loaders' default settings; planar runs: the polygon extruded over the arm's sensed height
+      band (or ``height`` metres); ``estimate.urdf`` loading it in PyBullet with the mass and
+      inertia of the estimate filled at ``density`` kg/m^3 (default
+      :data:`~explore3d.app.export.DEFAULT_DENSITY_KG_M3`) (plus ``estimate.obj`` when ``fmt`` is not
+      obj/stl);
+    * ``estimate_polygon.json`` (planar): the polygon as a list of [x, y], metres, counter-clockwise;
+    * ``points.ply``: the hull's input points with their wrap, attempt and link; localised
+      contacts (the default) also with their normal, force, uncertainty, the face segment across
+      the link's height and the interval along the link (:func:`write_exploration_points`);
+    * ``free_space.npz`` (runs with free space): the space every attempt swept through
+      (:func:`~explore3d.reconstruction.freespace.save_swept`), with which ``explore3d reconstruct
+      --free-space`` carves the hull as the run did;
+    * ``figure.png``/``views.png``, ``overview.png``, ``scene.png`` and ``signed_distance.png`` (the
+      estimate coloured by its signed distance to the truth, mm:
+      :func:`~explore3d.app.pictures.signed_distance_figure`) with ``pictures=True``.
+
+    ``mesh`` is the explored object (closed trimesh, metres), used for the pictures only.  Files
+    are written atomically.
+    """
+    import json
+    from pathlib import Path
+
+    from explore3d.app.export import DEFAULT_DENSITY_KG_M3, check_format, write_estimate_urdf, write_mesh
+    from explore3d.core.io import atomic_write_text
+
+    fmt = check_format(fmt)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    ex, estimate = result.exploration, result.estimate
+    write_exploration_points(ex, out / "points.ply")
+    names = ["points.ply"]
+    if ex.swept:
+        from explore3d.reconstruction.freespace import save_swept
+
+        save_swept(ex.swept, out / "free_space.npz")
+        names.append("free_space.npz")
+    if ex.config.mode == "planar":
+        ring = [[float(x), float(y)] for x, y in list(estimate.exterior.coords)[:-1]]
+        atomic_write_text(out / "estimate_polygon.json", json.dumps(ring, indent=2) + "\n")
+        names.append("estimate_polygon.json")
+    est_mesh = estimate_mesh(result, height)
+    mesh_name = f"estimate.{fmt}"
+    write_mesh(est_mesh, out / mesh_name, fmt)
+    write_estimate_urdf(mesh_name, out / "estimate.urdf", est_mesh,
+                        density=DEFAULT_DENSITY_KG_M3 if density is None else density)
+    names += [mesh_name, "estimate.urdf"] + ([] if fmt in ("obj", "stl") else ["estimate.obj"])  # PyBullet's copy
+    if pictures:
+        from explore3d.app import pictures as pics
+
+        names += pics.run_pictures(out, ex, estimate, result.truth, mesh, result.error)
+    return sorted(names)
+
+
+class NoContactError(RuntimeError):
+    """The exploration detected no contact at all.  ``exploration`` holds what was gathered
+    (None if unknown), so callers can still report the wraps that were run."""
+
+    def __init__(self, message: str, exploration: Exploration | None = None):
+        super().__init__(message)
+        self.exploration = exploration
+
+
+class ReconstructionError(ValueError):
+    """The points of an exploration did not give a hull (too few, degenerate, or not around the
+    rough centre).  ``exploration`` holds what was gathered."""
+
+    def __init__(self, message: str, exploration: Exploration | None = None):
+        super().__init__(message)
+        self.exploration = exploration
+
+
+
+
+
+
+
+
+
+
+
+
+def reconstruct_exploration(ex: Exploration, centre, radius: float, a: float = DEFAULT_A, method: str = "exponential",
+                            outlier_ratio: float | None = OUTLIER_RATIO):
+    """Inverse hull of an exploration's points about the rough ``centre`` (3,), dropping points
+    farther than ``radius`` metres from it and points far inside what other wraps saw in the same
+    direction (:func:`reconstruct_points`).  Planar explorations use the x-y components.  On a
+    table (``ex.table_z``) the lowest layer of points (within a link height) is also put on the
+    table plane (:func:`explore3d.reconstruction.tabletop.support_points`)."""
+    points, wrap = ex.points, ex.point_wrap
+    if ex.table_z is not None and len(points):
+        from explore3d.reconstruction.tabletop import support_points
+
+        extra = support_points(points, ex.table_z, ex.spec.link_height)
+        points = np.vstack([points, extra])
+        wrap = np.r_[wrap, np.full(len(extra), -1)]
+    return reconstruct_points(points, wrap, centre, radius, a=a, method=method, outlier_ratio=outlier_ratio)
+
+
+def planar_truth(mesh, z: float):
+    """The true 2D shape of the planar case: the mesh's cross-section at height ``z`` metres
+    (x-y, world frame, metres).
+
+    A mesh of several bodies (convex decompositions such as pybullet_data's ``*_vhacd.obj`` have
+    touching or overlapping pieces, whose joint section trimesh gets wrong) is cut body by body:
+    the union of the sections of positive-volume bodies minus those of inward-wound ones (cavities).
+    """
+    from shapely.ops import unary_union
+
+    from explore3d.world.objects import cross_section
+
+    bodies = mesh.split(only_watertight=False) if mesh.body_count > 1 else [mesh]
+    if len(bodies) == 1:
+        return cross_section(mesh, z=z)
+    solid, cavities = [], []
+    for body in bodies:
+        zlo, zhi = body.bounds[:, 2]
+        if zlo < z < zhi:
+            (solid if body.volume > 0 else cavities).append(cross_section(body, z=z))
+    if not solid:
+        return cross_section(mesh, z=z)  # raises: the plane misses the mesh
+    region = unary_union(solid)
+    return region.difference(unary_union(cavities)) if cavities else region
+
+
+def rough_bound_or(mesh, centre=None, radius=None) -> tuple[np.ndarray, float]:
+    """The robot's rough centre (3,) and radius (m): the given ones, checked, else
+    :func:`~explore3d.strategy.explore.rough_bound` of the mesh's vertices."""
+    from explore3d.core.validate import check_positive, check_vector
+
+    c0, r0 = rough_bound(mesh.vertices)
+    c = c0 if centre is None else check_vector(centre, "centre (the rough object centre x, y, z in metres)", 3)
+    r = r0 if radius is None else check_positive(radius, "radius (the rough bounding radius in metres)")
+    return c, r
+
+
+#: The most triangles an object may have: PyBullet's createCollisionShape from arrays fails above
+#: a vertex/index budget of its own (measured with pybullet 3.2.7: a 122,880-face mesh loads,
+#: 184,320 faces fail with "createCollisionShape failed" after seconds of work).
+MAX_OBJECT_FACES = 120_000
+
+
+def check_run_inputs(mesh, spec, config, a, method, centre, radius) -> None:
+    """Refuse, before any simulation, what :func:`run` cannot use: a ``mesh`` that is not a closed
+    trimesh of finite coordinates or has more than :data:`MAX_OBJECT_FACES` faces, a ``config``
+    that is not an :class:`ExploreConfig`, an ``a`` or ``method`` the inverse hull rejects, and an
+    object that does not fit the arm ``spec``: a rough radius (``radius``, m, or the mesh's own:
+    :func:`rough_bound_or`) beyond the arm's length (it cannot reach round it) or an object
+    smaller than one link's width (nothing of its shape can be resolved).  ValueError (TypeError
+    for wrong types) naming the fix."""
+    import trimesh
+
+    from explore3d.geometry.hull import _check_method, check_a
+    from explore3d.geometry.metrics import check_volume
+
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise TypeError(f"mesh must be a trimesh.Trimesh (e.g. explore3d.load_object('cube')); got {type(mesh).__name__}")
+    if not isinstance(config, ExploreConfig):
+        raise TypeError(f"config must be an explore3d.ExploreConfig (e.g. ExploreConfig(directions=4)); got "
+                        f"{type(config).__name__}")
+    bad = int((~np.isfinite(np.asarray(mesh.vertices, dtype=float))).any(axis=1).sum())
+    if bad:
+        raise ValueError(f"mesh has {bad} vertices with a non-finite (NaN or inf) coordinate; fix or remove them")
+    if len(mesh.faces) > MAX_OBJECT_FACES:
+        raise ValueError(f"mesh has {len(mesh.faces)} faces, more than the simulator takes ({MAX_OBJECT_FACES}); "
+                         "simplify it (e.g. trimesh's simplify_quadric_decimation) first")
+    check_volume(mesh, "mesh")
+    check_a(a)
+    _check_method(method)
+    _, radius = rough_bound_or(mesh, centre, radius)
+    if radius > spec.reach:
+        raise ValueError(f"the object's rough radius {radius:.3g} m exceeds the arm's length {spec.reach:.3g} m ({spec.name}: "
+                         f"{spec.n_links} links of {spec.link_length:g} m): it cannot reach round it; use a smaller "
+                         "object (load_object(size=), --size) or a longer arm (--arm)")
+    across = float(np.max(mesh.extents))
+    if across < spec.link_width:
+        raise ValueError(f"the object is {across:.3g} m across, smaller than the arm's link width {spec.link_width:g} m: "
+                         "the arm cannot resolve its shape; use a larger object (load_object(size=), --size) or a "
+                         "finer arm (--arm)")
+
+
+def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float = DEFAULT_A,
+        method: str = "exponential", progress=None, *, centre=None, radius=None, seed: int = 0,
+        setup=None, after_wrap=None) -> Result:
+    """Explore ``mesh`` (closed trimesh, metres) with ``arm``, reconstruct, and score.
+
+    Args:
+        mesh: the object (given to the simulated world only).
+        arm: built-in arm name, URDF path or :class:`~explore3d.arm.spec.ArmSpec`.
+        config: how to explore.
+        a: inverse-hull coarseness > 0; method: "exponential" or "spherical".
+        progress: None, or ``progress(done, total)`` called after each wrap.
+        centre, radius: the rough location (3,), world frame, metres, and bounding radius (m) the
+            robot is told (the user's rough bound of where the object is).  Default: the
+            bounding-box centre of ``mesh`` and 1.05 times its largest vertex distance from it
+            (:func:`~explore3d.strategy.explore.rough_bound`).
+        seed: seed of the surface samples of the Chamfer/Hausdorff measures (3D).
+        setup, after_wrap: the settled scene and the evaluation's per-wrap hook
+            (:func:`~explore3d.world.explore.explore`); a scene other than the ideal one is settled here
+            when ``setup`` is None, and the truth is the object as it rests.
+
+    Raises:
+        NoContactError: the arm touched nothing (the object is out of reach or too big).
+        ReconstructionError: the contact points gave no hull (a ValueError).
+    """
+    from explore3d.arm.urdf import load_arm
+    from explore3d.geometry.metrics import shape_error
+
+    spec = load_arm(arm)
+    check_run_inputs(mesh, spec, config, a, method, centre, radius)
+    if setup is None and not config.scene.ideal:
+        from explore3d.world.scene import settle_scene
+
+        setup = settle_scene(mesh, config.scene, spec, config.sim)
+    truth = mesh if setup is None else setup.truth  # the object as it rests
+    centre, radius = rough_bound_or(truth, centre, radius)
+    ex = explore(mesh, arm, config, centre=centre, radius=radius, progress=progress, setup=setup,
+                 after_wrap=after_wrap)
+    if ex.n_contacts == 0:
+        raise NoContactError(
+            "the arm made no contact with the object: it is out of reach, too large for the arm, or the rough "
+            "centre/radius is wrong; use a longer arm (arm=, --arm), a smaller object (load_object(size=), --size) "
+            "or a correct rough bound (centre=/radius=, --centre/--radius)",
+            exploration=ex,
+        )
+    try:
+        hull = reconstruct_exploration(ex, centre, radius, a=a, method=method)
+    except ValueError as exc:
+        what = str(exc).split("; ")[0]  # inverse_hull's own fix hints are about its arguments, not the run
+        n_used = int(hull_input_mask(ex.points, ex.point_wrap, centre, radius).sum())
+        raise ReconstructionError(
+            f"no shape from the {n_used} {'localised contacts' if config.points == 'contacts' else 'link points'} "
+            f"within {radius:.3g} m of the rough centre ({what}); "
+            "explore from more directions or with more attempts (ExploreConfig directions/attempts, --directions/"
+            "--attempts) so the arm surrounds the object, or correct the rough centre/radius", exploration=ex,
+        ) from None
+    truth = planar_truth(mesh, float(centre[2])) if config.mode == "planar" else truth
+    carved = None
+    if config.mode == "3d" and config.free_space:
+        from explore3d.reconstruction.carve import carve
+
+        carved = carve(hull.mesh, ex.swept)
+    est = hull.shape() if carved is None else carved.mesh
+    cut = None
+    if ex.table_z is not None:
+        from explore3d.reconstruction.tabletop import cut_at_table
+
+        cut = est = cut_at_table(est, ex.table_z)
+    return Result(exploration=ex, hull=hull, truth=truth, error=shape_error(est, truth, seed=seed),
+                  centre=centre, radius=radius, n_points_used=len(hull.points), carved=carved, cut=cut,
+                  setup=setup)  # the hull's input
+
+
+# --- a complete run: what `explore3d run` does -------------------------------------------------------
+
+@dataclass(frozen=True)
+class OutputConfig:
+    """What :func:`run_and_report` writes besides report.json.
+
+    Attributes:
+        fmt: estimate mesh format, one of :data:`~explore3d.app.export.MESH_FORMATS`.
+        pictures: write the PNG pictures.
+        quality: compute the contact-quality figures (:func:`~explore3d.world.quality.contact_quality`:
+            evaluation only, against the true mesh, after the run).  Off by default: they need
+            the recorded trajectories and cost more than the exploration (measured on 2 cores:
+            cube 45 s exploring + 33 s quality; duck 34 s + 13 min).
+        density: of the estimate body in estimate.urdf, kg/m^3.
+        height: planar runs: extrude the estimate polygon over this many metres centred on the
+            arm's plane; None: over the arm's sensed height band (:func:`sensed_z_band`).
+    """
+
+    fmt: str = "obj"
+    pictures: bool = True
+    quality: bool = False
+    density: float = DEFAULT_DENSITY_KG_M3
+    height: float | None = None
+
+    def __post_init__(self):
+        from explore3d.app.export import check_format
+
+        object.__setattr__(self, "fmt", check_format(self.fmt))
+        for name in ("pictures", "quality"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be True or False; got {getattr(self, name)!r}")
+        d = self.density
+        if isinstance(d, bool) or not isinstance(d, (int, float)) or not (math.isfinite(d) and d > 0):
+            raise ValueError(f"density must be a positive number of kg/m^3; got {d!r}")
+        h = self.height
+        if h is not None and (isinstance(h, bool) or not isinstance(h, (int, float)) or not (math.isfinite(h) and h > 0)):
+            raise ValueError(f"height must be None or a positive number of metres; got {h!r}")
+
+
+#: Every file name :func:`run_and_report` can write into its folder (report.json and what
+#: :func:`write_result` writes, any format): a run replaces or removes all of them, so a folder
+#: never mixes two runs.
+RUN_FILES = frozenset({"report.json", "points.ply", "free_space.npz", "estimate_polygon.json", "estimate.urdf",
+                       "figure.png", "views.png", "overview.png", "scene.png", "signed_distance.png",
+                       *(f"estimate.{f}" for f in ("obj", "stl", "ply", "off", "glb"))})
+
+#: Test hook (seconds): :func:`run_and_report` sleeps this long after writing the estimate files
+#: into its staging folder and before report.json and the switch, so tests can interrupt or kill a
+#: run while it writes.  Unset or empty: no pause.
+WRITE_PAUSE_ENV = "EXPLORE3D_TEST_WRITE_PAUSE_S"
+
+
+def _test_write_pause() -> None:
+    import os
+
+    v = os.environ.get(WRITE_PAUSE_ENV)
+    if v:
+        import time
+
+        time.sleep(float(v))
+
+
+def package_versions() -> dict:
+    """Versions of explore3d and its main dependencies (for report.json)."""
+    from importlib import metadata
+
+    from explore3d import __version__
+
+    out = {"explore3d": __version__}
+    for name in ("numpy", "scipy", "trimesh", "pybullet", "shapely"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+def run_and_report(mesh, arm="default", config: ExploreConfig = ExploreConfig(), out=None, *,
+                   output: OutputConfig = OutputConfig(), a: float = DEFAULT_A, method: str = "exponential",
+                   seed: int = 0, centre=None, radius=None, calibrate: bool = False, progress=None,
+                   object_name: str = "object", source: dict | None = None) -> tuple[Result, dict]:
+    """Explore, reconstruct and score ``mesh`` like :func:`run`, then write report.json and the
+    files of :func:`write_result` into folder ``out``: what ``explore3d run`` does.
+
+    Args:
+        mesh, arm, config, a, method, seed, centre, radius, progress: as for :func:`run`.
+        out: output folder (created).
+        output: what to write (:class:`OutputConfig`).
+        calibrate: first calibrate the contact thickness on the known 60 mm ball
+            (:func:`~explore3d.world.calibration.calibrate_thickness`, never ``mesh``) and explore with it
+            (link points only: ``config.points == "links"``; ValueError otherwise).
+        object_name: how the report names the object; source: more facts about how ``mesh`` was
+            made (e.g. ``{"scale": ..., "size": ...}``), copied into ``report["config"]``.
+
+    Returns:
+        the :class:`Result` and the report (the dict written to ``out/report.json``).  Its
+        ``timings`` (seconds): ``calibration_s``, ``band_s`` (the contact band: measured the first
+        time for a setting, else read from the cache), ``explore_s`` (the wraps), ``run_s``
+        (exploration, reconstruction and scoring), ``quality_s`` (only with ``output.quality``),
+        ``write_s`` (files and pictures), ``total_s``.
+
+    Raises:
+        NoContactError, ReconstructionError: as :func:`run`, after writing report.json (with an
+            ``error`` entry) and points.ply (if any points) into ``out``.
+
+    All or nothing: every file is written into a hidden staging folder in ``out``
+    (:class:`~explore3d.core.io.StagedFolder`) and the folder is switched to the new set at the end, so
+    ``out`` never mixes two runs among :data:`RUN_FILES`:
+
+    * a completed run leaves exactly its files (an earlier run's files it does not write, e.g. the
+      pictures after ``pictures=False`` or another mesh format, are removed);
+    * a failed run (NoContactError, ReconstructionError) leaves its report.json (with ``error``)
+      and points.ply (if any points), and none of an earlier run's estimate files;
+    * an interrupted run (KeyboardInterrupt), any other exception or a kill before the switch
+      leaves ``out`` as it was (the earlier set, or no run files); the switch itself runs with
+      SIGINT/SIGTERM deferred, and a SIGKILL inside it is finished by the next run into ``out``.
+      Whenever ``out/report.json`` exists, the run files beside it are that run's complete set;
+    * the next run into ``out`` removes the staging folders and ``.*.part*`` temporaries of killed
+      runs (their pid no longer alive): :func:`explore3d.core.io.stale_leftovers`.
+
+    Test hook: the environment variable :data:`WRITE_PAUSE_ENV` pauses the writing.
+    """
+    import dataclasses
+    import time
+    from pathlib import Path
+
+    from explore3d.arm.urdf import load_arm
+    from explore3d.core.io import StagedFolder
+
+    if out is None:
+        raise ValueError("run_and_report needs an output folder: pass out=")
+    if not isinstance(output, OutputConfig):
+        raise ValueError(f"output must be an OutputConfig; got {type(output).__name__}")
+    t_start = time.perf_counter()
+    timings = {}
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    spec = load_arm(arm)
+    bound_given = centre is not None or radius is not None
+    setup = watch = None
+    if not config.scene.ideal:  # the evaluation's setup: the object settled on its table
+        from explore3d.world.scene import SceneWatch, settle_scene
+
+        t0 = time.perf_counter()
+        setup = settle_scene(mesh, config.scene, spec, config.sim)
+        timings["settle_s"] = time.perf_counter() - t0
+        watch = SceneWatch(setup)
+    centre, radius = rough_bound_or(mesh if setup is None else setup.truth, centre, radius)
+    report = {
+        "object": object_name, "mode": config.mode, "arm": arm if isinstance(arm, str) else spec.name,
+        "a": a, "method": method,
+        "config": {"explore": config.to_dict(), "arm": spec.to_dict(), "a": a, "method": method, "seed": seed,
+                   "centre_m": [float(x) for x in centre], "radius_m": float(radius),
+                   "rough_bound": "given" if bound_given else "rough_bound(mesh)",
+                   "format": output.fmt, "pictures": output.pictures, "quality": output.quality,
+                   "density_kg_m3": float(output.density), "height_m": output.height, **(source or {})},
+        "versions": package_versions(),
+        "timings": timings,
+    }
+    if calibrate and config.points != "links":
+        raise ValueError("calibrate corrects the thickness of the paper's link points; the localised contacts "
+                         "(the default) lie on the links' surfaces already: explore with points='links' "
+                         "(--points links) to calibrate, or drop calibrate (--calibrate)")
+    if calibrate:
+        from explore3d.world.calibration import calibrate_thickness
+
+        t0 = time.perf_counter()
+        cal = calibrate_thickness(spec, config)
+        timings["calibration_s"] = time.perf_counter() - t0
+        config = dataclasses.replace(config, face_offset=cal.face_offset_m)
+        report["calibration"] = cal.to_dict()
+        report["config"]["explore"] = config.to_dict()
+    if output.quality:  # the quality figures read the recorded trajectories
+        config = dataclasses.replace(config, record=True)
+        report["config"]["explore"] = config.to_dict()
+    with StagedFolder(out, RUN_FILES, last="report.json") as staged:  # discarded unless committed
+        return _run_into(staged, report, timings, t_start, mesh, spec, config, output, a, method, seed,
+                         centre, radius, progress, setup, watch)
+
+
+def _run_into(staged, report, timings, t_start, mesh, spec, config, output, a, method, seed, centre, radius,
+              progress, setup, watch):
+    """The rest of :func:`run_and_report`: run, write into ``staged.path``, then switch ``out``."""
+    import time
+
+    from explore3d.core.interrupt import check_interrupt
+    from explore3d.core.io import atomic_write_text, json_text
+
+    stage = staged.path
+
+    def finish():
+        timings["total_s"] = time.perf_counter() - t_start
+        atomic_write_text(stage / "report.json", json_text(report))
+        check_interrupt()  # an interrupt swallowed somewhere: do not switch the folder
+        staged.commit()
+
+    t0 = time.perf_counter()
+    try:
+        res = run(mesh, spec, config, a=a, method=method, progress=progress, centre=centre, radius=radius,
+                  seed=seed, setup=setup, after_wrap=None if watch is None else watch.after_wrap)
+    except (NoContactError, ReconstructionError) as exc:
+        ex = exc.exploration
+        timings["run_s"] = time.perf_counter() - t0
+        if ex is not None:
+            timings["explore_s"] = float(ex.wall_s)
+            report.update(exploration_summary(ex))
+            if len(ex.points):
+                write_exploration_points(ex, stage / "points.ply")
+        report["error"] = str(exc)
+        finish()
+        raise
+    timings["run_s"] = time.perf_counter() - t0
+    timings["explore_s"] = float(res.exploration.wall_s)
+    timings["band_s"] = float(res.exploration.band_s)
+    summary = res.summary()
+    for k in ("centre_m", "radius_m"):  # already in config
+        summary.pop(k)
+    report.update(summary)
+    report["errors"] = res.error.to_dict()
+    if setup is not None:  # evaluation: the settled scene, the object's true drift, false detections
+        report["scene"] = {**setup.to_dict(), **watch.summary(res.exploration),
+                           "table_contacts_dropped": int(table_contacts(res.exploration))}
+    report["contact_band"] = res.exploration.band.to_dict()  # per joint, rad, and how it was measured
+    if config.mode == "planar":
+        report["section_z_m"] = float(res.centre[2])  # the arm's plane passes through the rough centre
+        report["estimate_z_band_m"] = list(extrusion_band(res.exploration, output.height))
+    if output.quality:
+        from explore3d.world.quality import contact_quality
+
+        t0 = time.perf_counter()
+        report["contact_quality"] = contact_quality(res.exploration, mesh if res.setup is None else res.truth).to_dict()  # evaluation only
+        timings["quality_s"] = time.perf_counter() - t0
+    check_interrupt()
+    t0 = time.perf_counter()
+    files = write_result(res, mesh if res.setup is None else res.truth, stage, output.fmt, pictures=output.pictures, density=output.density,
+                         height=output.height)
+    timings["write_s"] = time.perf_counter() - t0
+    _test_write_pause()
+    report["files"] = sorted(files + ["report.json"])
+    finish()
+    return res, report
