@@ -18,7 +18,7 @@ def entry() -> None:
     and said so) it leaves by ``os._exit``, skipping the interpreter's teardown, where objects the
     interrupt left half-made could still print or the interpreter re-kill itself with SIGINT."""
     signal.signal(signal.SIGINT, _interrupted_early)
-    from explore3d.app.cli import main
+    from explore3d.app.cli import main  # start-up: after the SIGINT handler is in place
 
     code = main()
     if code == 130:

@@ -85,7 +85,7 @@ def git_commit() -> str:
 def save_exploration(ex, skin, folder: Path) -> None:
     """Keep ``ex``'s hull points, free space and ideal-skin points in ``folder``."""
     from explore3d.reconstruction.freespace import save_swept
-    from explore3d.app.pipeline import write_exploration_points
+    from explore3d.app.report import write_exploration_points
 
     folder.mkdir(parents=True, exist_ok=True)
     write_exploration_points(ex, folder / "points.ply")

@@ -275,8 +275,9 @@ def _no_exploring(monkeypatch):
     def explored(*args, **kwargs):
         raise AssertionError("the bad input reached the exploration")
 
-    for name in ("explore3d.app.pipeline", "explore3d.strategy.explore"):  # the package's `explore` is the function
+    for name in ("explore3d.app.pipeline", "explore3d.app.compare", "explore3d.world.explore"):  # each binds `explore`
         monkeypatch.setattr(importlib.import_module(name), "explore", explored)
+    monkeypatch.setattr(importlib.import_module("explore3d.world.explore"), "explore_robots", explored)
 
 
 @pytest.mark.parametrize("i", range(22))

@@ -598,7 +598,7 @@ def test_default_a_is_one_value_outside_the_paper_replica():
     import inspect
 
     from explore3d.geometry import hull
-    from explore3d.app import pipeline
+    from explore3d.app import pipeline, report
     from explore3d.world import simulated
     from explore3d.app import table1
     from explore3d.app.settings import RUN_DEFAULTS
@@ -607,7 +607,7 @@ def test_default_a_is_one_value_outside_the_paper_replica():
     def default(f):
         return inspect.signature(f).parameters["a"].default
 
-    for f in (pipeline.run, pipeline.run_and_report, pipeline.reconstruct_exploration, pipeline.reconstruct_points,
+    for f in (pipeline.run, report.run_and_report, pipeline.reconstruct_exploration, pipeline.reconstruct_points,
               hull.inverse_hull, hull.invert_points, table1.table3d_rows):
         assert default(f) == DEFAULT_A, f.__name__
     assert RUN_DEFAULTS["a"] == DEFAULT_A

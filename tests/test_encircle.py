@@ -128,6 +128,7 @@ def test_a_wrap_does_not_depend_on_the_wraps_before_it():
     from explore3d.arm.urdf import load_arm
     from explore3d.world.band import cached_band
     from explore3d.strategy.explore import _WORKER, _init_worker, _run_one, wrap_poses
+    from explore3d.world.explore import SimWorkcells
     from explore3d.world.objects import cylinder
 
     m, spec, cfg = cylinder(), load_arm("default"), ExploreConfig()
@@ -136,7 +137,7 @@ def test_a_wrap_does_not_depend_on_the_wraps_before_it():
     band = cached_band(spec, cfg.control, cfg.sim, cfg.sensors, False)
 
     def run(order):
-        _init_worker(spec, np.asarray(m.vertices, float), np.asarray(m.faces, np.int64), cfg.sim)
+        _init_worker(SimWorkcells(spec, np.asarray(m.vertices, float), np.asarray(m.faces, np.int64), cfg.sim))
         try:
             return {i: _run_one((i, poses[i].T_world_base, band, cfg, (c, r), None))[0] for i in order}
         finally:

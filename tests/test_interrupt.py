@@ -17,7 +17,7 @@ import psutil
 import pytest
 
 from explore3d.core.io import STAGING_PREFIX
-from explore3d.app.pipeline import RUN_FILES, WRITE_PAUSE_ENV
+from explore3d.app.report import RUN_FILES, WRITE_PAUSE_ENV
 
 REPO = str(Path(__file__).resolve().parents[1])
 

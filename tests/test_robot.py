@@ -251,7 +251,7 @@ ORACLE_FREE = textwrap.dedent("""
     assert np.array_equal(ex.points, ex.contacts.points[ex.contacts.used])
     # the curl-back encirclement too: its hairpin moves between sweeps happened
     from explore3d.strategy.encircle import CurlBack
-    from explore3d.strategy.explore import explore
+    from explore3d.world.explore import explore
     cb = explore(cube(), arm, ExploreConfig(directions=3, angles=1, jobs=2, record=True, probes=None,
                                             curl_back=CurlBack()))
     assert cb.n_contacts > 0 and any((a.trajectory_ref < -0.3).any() for w in cb.attempts for a in w)

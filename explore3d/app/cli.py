@@ -10,7 +10,7 @@ The parser produces the same dataclasses the Python API takes (:class:`ExploreCo
   format, bad TOML config); the same one-line form;
 * 130: interrupted (Ctrl-C, SIGINT, at any moment): ``explore3d: error: interrupted``, no
   traceback from the command or its worker processes; ``run`` leaves its output folder as it was
-  (:func:`explore3d.app.pipeline.run_and_report`: all or nothing).
+  (:func:`explore3d.app.report.run_and_report`: all or nothing).
 
 Heavy modules (numpy, trimesh, pybullet, matplotlib) are imported inside the commands, so
 ``explore3d --help`` is instant.
@@ -25,9 +25,21 @@ import math
 import sys
 from pathlib import Path
 
-from explore3d.core.defaults import DEFAULT_A, MAX_A
-from explore3d.core.defaults import ESTIMATOR_NAMES, SCENE_NAMES
-from explore3d.app.settings import (DEFAULT_DENSITY_KG_M3, MESH_FORMATS, RUN_OPTIONS, RunError, UsageError, _centre, _int_min, _number, _positive, explore_config, resolve_run_options)
+from explore3d.app.settings import (
+    DEFAULT_DENSITY_KG_M3,
+    MESH_FORMATS,
+    RUN_OPTIONS,
+    SWEEP_KEYS,
+    RunError,
+    UsageError,
+    _centre,
+    _int_min,
+    _number,
+    _positive,
+    explore_config,
+    resolve_run_options,
+)
+from explore3d.core.defaults import DEFAULT_A, ESTIMATOR_NAMES, MAX_A, SCENE_NAMES
 
 PROG = "explore3d"
 
@@ -248,7 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "the combinations without a row run (and runs lost to a killed or vanished "
                                    "worker).  Failed runs (also crashed workers) are stored with a one-line reason.  "
                                    "One sweep at a time per --out folder (a second one refuses to start).  Settings: "
-                                   + ", ".join(_sweep_keys()) + ".  Exit codes: 0 at least one combination is stored "
+                                   + ", ".join(SWEEP_KEYS) + ".  Exit codes: 0 at least one combination is stored "
                                    "as ok (failures, if any, are counted in one line on stderr); 1 every combination "
                                    "failed, another sweep runs on --out, --out holds a sweep.db that is not a "
                                    "sweep's, or --out cannot be written; 2 a usage error; 130 interrupted.")
@@ -291,7 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _version() -> str:
-    from explore3d import __version__
+    from explore3d import __version__  # start-up: kept out of explore3d --help's
 
     return __version__
 
@@ -303,7 +315,7 @@ def _version() -> str:
 
 
 def _check_object_name(spec: str) -> None:
-    from explore3d.world.objects import BUILTIN_OBJECTS
+    from explore3d.world.objects import BUILTIN_OBJECTS  # start-up: kept out of explore3d --help's
 
     if spec in BUILTIN_OBJECTS or spec.startswith("pybullet_data:"):
         return
@@ -315,7 +327,7 @@ def _check_object_name(spec: str) -> None:
 
 def _prepare_out_dir(out: Path) -> None:
     """Create ``out`` and check it is writable, before any simulation is spent."""
-    import tempfile
+    import tempfile  # start-up: kept out of explore3d --help's
 
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -327,13 +339,13 @@ def _prepare_out_dir(out: Path) -> None:
 
 
 def _dump(obj) -> str:
-    from explore3d.core.io import json_text
+    from explore3d.core.io import json_text  # start-up: kept out of explore3d --help's
 
     return json_text(obj)
 
 
 def cmd_run(args) -> int:
-    """Parse -> configuration dataclasses -> :func:`explore3d.app.pipeline.run_and_report` -> one line."""
+    """Parse -> configuration dataclasses -> :func:`explore3d.app.report.run_and_report` -> one line."""
     opts = resolve_run_options(args)
     _setup_logging(args.verbose)
     out = Path(opts["out"])
@@ -345,11 +357,12 @@ def cmd_run(args) -> int:
         raise UsageError("--calibrate and --face-offset correct the paper's link points; the localised contacts (the "
                          "default) lie on the links' surfaces already: add --points links, or drop them")
 
-    from explore3d.core.quiet import STDERR, quiet_c_output
+    from explore3d.core.quiet import STDERR, quiet_c_output  # start-up: kept out of explore3d --help's
 
     with quiet_c_output():  # PyBullet's banners (import, connect, solver switch, renderer)
-        from explore3d.arm.urdf import load_arm
-        from explore3d.app.pipeline import NoContactError, OutputConfig, ReconstructionError, check_run_inputs, run_and_report
+        from explore3d.app.pipeline import NoContactError, ReconstructionError, check_run_inputs
+        from explore3d.app.report import OutputConfig, run_and_report
+        from explore3d.arm.urdf import load_arm  # start-up: kept out of explore3d --help's
 
         try:
             spec = load_arm(opts["arm"])
@@ -360,12 +373,12 @@ def cmd_run(args) -> int:
             raise UsageError(str(exc)) from None
         _prepare_out_dir(out)
 
-        import numpy as np
+        import numpy as np  # start-up: kept out of explore3d --help's
 
         from explore3d.world.objects import load_object
 
         mesh = load_object(opts["object"], scale=opts.get("scale"), size=opts.get("size"))
-        from explore3d.core.interrupt import check_interrupt
+        from explore3d.core.interrupt import check_interrupt  # start-up: kept out of explore3d --help's
 
         check_interrupt()  # a Ctrl-C an import swallowed (trimesh's optional imports catch everything)
         log.info("object %s: extents %s m", opts["object"], np.round(mesh.extents, 4).tolist())
@@ -373,7 +386,7 @@ def cmd_run(args) -> int:
 
         bar = None
         if not args.quiet:
-            from tqdm import tqdm
+            from tqdm import tqdm  # start-up: kept out of explore3d --help's
 
             bar = tqdm(total=None, desc="wraps", unit="wrap", file=STDERR, leave=False)
 
@@ -411,12 +424,17 @@ def cmd_run(args) -> int:
 def cmd_reconstruct(args) -> int:
     """The hull input is built as ``run`` builds it (:func:`explore3d.reconstruction.hull_input.hull_input_mask`:
     the rough bound, then the angular outlier filter over the wrap ids stored in points.ply)."""
-    from explore3d.app.export import check_format, points_2d_if_planar, read_points_ply, write_mesh
-    from explore3d.geometry.hull import resolve_centre
-    from explore3d.core.io import atomic_write_text
-    from explore3d.reconstruction.hull_input import hull_input_mask, reconstruct_points
-
     import numpy as np
+
+    from explore3d.app.export import (  # start-up: kept out of explore3d --help's
+        check_format,
+        points_2d_if_planar,
+        read_points_ply,
+        write_mesh,
+    )
+    from explore3d.core.io import atomic_write_text
+    from explore3d.geometry.hull import resolve_centre
+    from explore3d.reconstruction.hull_input import hull_input_mask, reconstruct_points
 
     out = Path(args.out)
     suffix = out.suffix.lower().lstrip(".")
@@ -455,7 +473,7 @@ def cmd_reconstruct(args) -> int:
         elif args.height is None:
             raise UsageError("the points are 2D (z = 0): write a polygon with --out X.json or give --height M to extrude")
         else:
-            import trimesh
+            import trimesh  # start-up: kept out of explore3d --help's
 
             m = trimesh.creation.extrude_polygon(poly, float(args.height))
             m.apply_translation([0.0, 0.0, -0.5 * float(args.height)])  # centred on the points' plane z = 0
@@ -467,18 +485,18 @@ def cmd_reconstruct(args) -> int:
         m = hull.mesh
         swept = []
         if args.free_space is not None:
-            from explore3d.reconstruction.freespace import load_swept
+            from explore3d.reconstruction.freespace import load_swept  # start-up: kept out of explore3d --help's
 
             try:
                 swept = load_swept(args.free_space)
             except ValueError as exc:
                 raise RunError(f"--free-space: {exc}") from None
         if args.estimator == "inverse-hull" and swept:
-            from explore3d.reconstruction.carve import carve
+            from explore3d.reconstruction.carve import carve  # start-up: kept out of explore3d --help's
 
             m = carve(m, swept).mesh
         elif args.estimator != "inverse-hull":
-            from explore3d.reconstruction.estimators import estimate
+            from explore3d.reconstruction.estimators import estimate  # start-up: kept out of explore3d --help's
 
             normals = None
             if args.estimator == "implicit":
@@ -489,7 +507,7 @@ def cmd_reconstruct(args) -> int:
             m = estimate(args.estimator, pts, wrap, c, radius, swept, a=args.a, normals=normals)
         write_mesh(m, out, suffix)
         print(f"mesh of {len(m.vertices)} vertices, {len(m.faces)} faces, volume {m.volume:.6g} m^3 -> {out}")
-        import trimesh
+        import trimesh  # start-up: kept out of explore3d --help's
 
         if not trimesh.Trimesh(m.vertices, m.faces).is_watertight:  # what a loader's vertex merge gives
             print(f"warning: the estimate touches itself at a vertex or an edge (the carving or union left a pinch): "
@@ -501,7 +519,7 @@ def cmd_reconstruct(args) -> int:
 def _load_shape(spec: str, what: str):
     """A shapely Polygon from a JSON list of [x, y] (metres), else a closed mesh via load_object."""
     if spec.lower().endswith(".json"):
-        from shapely.geometry import Polygon
+        from shapely.geometry import Polygon  # start-up: kept out of explore3d --help's
 
         p = Path(spec)
         if not p.is_file():
@@ -517,14 +535,14 @@ def _load_shape(spec: str, what: str):
         if not poly.is_valid or poly.area <= 0:
             raise RunError(f"{what} {p} is not a valid polygon (self-intersecting or zero area)")
         return poly
-    from explore3d.world.objects import load_object
+    from explore3d.world.objects import load_object  # start-up: kept out of explore3d --help's
 
     _check_object_name(spec)
     return load_object(spec)
 
 
 def cmd_evaluate(args) -> int:
-    from explore3d.geometry.metrics import shape_error
+    from explore3d.geometry.metrics import shape_error  # start-up: kept out of explore3d --help's
 
     est = _load_shape(args.estimate, "estimate")
     tru = _load_shape(args.truth, "truth")
@@ -545,7 +563,7 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from explore3d.core.quiet import quiet_c_output
+    from explore3d.core.quiet import quiet_c_output  # start-up: kept out of explore3d --help's
 
     _check_object_name(args.object)
     opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs", "probes", "fingers",
@@ -553,14 +571,14 @@ def cmd_compare(args) -> int:
             if getattr(args, k) is not None}
     config = explore_config({**opts, "probes": 0} if args.no_free_space else opts)
     if args.no_free_space:
-        import dataclasses
+        import dataclasses  # start-up: kept out of explore3d --help's
 
         config = dataclasses.replace(config, free_space=False)
     with quiet_c_output():
-        from explore3d.arm.urdf import load_arm
         from explore3d.app.compare import compare, format_compare
-        from explore3d.world.objects import load_object
         from explore3d.app.pipeline import NoContactError, ReconstructionError
+        from explore3d.arm.urdf import load_arm  # start-up: kept out of explore3d --help's
+        from explore3d.world.objects import load_object
 
         try:
             spec = load_arm(args.arm)
@@ -582,20 +600,21 @@ def cmd_compare(args) -> int:
     return 0
 
 
-def _sweep_keys():
-    from explore3d.app.sweep import SWEEP_KEYS
-
-    return SWEEP_KEYS
-
-
 def cmd_sweep(args) -> int:
     """Parse -> :func:`explore3d.app.sweep.run_sweep` -> one summary line (stdout), and one line on
     stderr counting the failed combinations, if any.  Exit code 0 when at least one combination is
     stored as ok, 1 when every one failed (or the sweep could not start: folder busy, not a sweep's
     database, not writable), 2 for a usage error."""
-    import os
+    import os  # start-up: kept out of explore3d --help's
 
-    from explore3d.app.sweep import SweepBusyError, SweepDatabaseError, parse_grid, read_grid_file, run_sweep, sweep_tasks
+    from explore3d.app.sweep import (
+        SweepBusyError,
+        SweepDatabaseError,
+        parse_grid,
+        read_grid_file,
+        run_sweep,
+        sweep_tasks,
+    )
 
     try:
         grid = read_grid_file(args.grid_file) if args.grid_file else {}
@@ -626,7 +645,7 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_sweep_report(args) -> int:
-    from explore3d.app.sweep_report import write_sweep_report
+    from explore3d.app.sweep_report import write_sweep_report  # start-up: kept out of explore3d --help's
 
     try:
         files = write_sweep_report(args.folder, args.out, thumbnails=args.thumbnails)
@@ -638,10 +657,10 @@ def cmd_sweep_report(args) -> int:
 
 def cmd_table1(args) -> int:
     try:
-        from explore3d.app import table1
+        from explore3d.app import table1  # start-up: kept out of explore3d --help's
     except ImportError as exc:
         raise RunError(f"explore3d.app.table1 is not available ({exc}); update explore3d") from None
-    from explore3d.core.quiet import quiet_c_output
+    from explore3d.core.quiet import quiet_c_output  # start-up: kept out of explore3d --help's
 
     kw = {k: getattr(args, k) for k in ("a", "seed") if getattr(args, k) is not None}
     with quiet_c_output():  # PyBullet's banners would come before the table (or the JSON) on stdout
@@ -667,7 +686,7 @@ def cmd_table1(args) -> int:
 
 def arm_spec_from_args(args):
     """The :class:`ArmSpec` of ``explore3d arm``: ``--base`` with the given fields replaced."""
-    import dataclasses
+    import dataclasses  # start-up: kept out of explore3d --help's
 
     from explore3d.arm.urdf import load_arm
 
@@ -681,7 +700,7 @@ def arm_spec_from_args(args):
 
 
 def cmd_arm(args) -> int:
-    from explore3d.arm.urdf import write_arm_urdf
+    from explore3d.arm.urdf import write_arm_urdf  # start-up: kept out of explore3d --help's
 
     spec = arm_spec_from_args(args)
     path = write_arm_urdf(spec, args.out)
@@ -690,7 +709,7 @@ def cmd_arm(args) -> int:
 
 
 def cmd_objects(args) -> int:
-    from explore3d.world.objects import BUILTIN_OBJECTS, object_size
+    from explore3d.world.objects import BUILTIN_OBJECTS, object_size  # start-up: kept out of explore3d --help's
 
     rows = []
     for name, info in BUILTIN_OBJECTS.items():
@@ -712,7 +731,7 @@ def _setup_logging(verbose: int) -> None:
     """Log records of explore3d at WARNING (INFO with -v, DEBUG with -vv) to the terminal's stderr,
     also inside :func:`~explore3d.core.quiet.quiet_c_output` (whose block points fd 2 at /dev/null: the
     handler writes to whatever ``sys.stderr`` is at the time, which the block keeps on the terminal)."""
-    from explore3d.core.quiet import STDERR
+    from explore3d.core.quiet import STDERR  # start-up: kept out of explore3d --help's
 
     level = logging.WARNING if not verbose else (logging.INFO if verbose == 1 else logging.DEBUG)
     logger = logging.getLogger("explore3d")
@@ -734,7 +753,7 @@ def _quiet_interrupt_unraisable(hook):
     """A ``sys.unraisablehook`` that drops the KeyboardInterrupt of a Ctrl-C that landed in a
     ``__del__`` or a callback (the run honours it at its next check), and once interrupted every
     such message (what the unwinding leaves half-made objects to say); the rest go to ``hook``."""
-    from explore3d.core.interrupt import INTERRUPTED
+    from explore3d.core.interrupt import INTERRUPTED  # start-up: kept out of explore3d --help's
 
     def f(unraisable):
         if INTERRUPTED[0] or isinstance(unraisable.exc_value, KeyboardInterrupt):
@@ -750,7 +769,7 @@ def _interrupt_handling():
     nothing.  Only in the main thread; the previous handler and hook are restored, and the flag is
     cleared (library calls after ``main`` in the same process are not taken for interrupted); the
     yielded dict's ``"interrupted"`` says whether a SIGINT came."""
-    import signal
+    import signal  # start-up: kept out of explore3d --help's
     import threading
 
     from explore3d.core.interrupt import INTERRUPTED, sigint_handler
@@ -787,7 +806,7 @@ def main(argv=None) -> int:
 
 
 def _main(argv) -> int:
-    from explore3d.core.interrupt import INTERRUPTED
+    from explore3d.core.interrupt import INTERRUPTED  # start-up: kept out of explore3d --help's
 
     parser = build_parser()
     try:

@@ -10,12 +10,21 @@ misses too is what the sweeps never touched.
 """
 from __future__ import annotations
 
+import dataclasses
+import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from explore3d.app.pipeline import NoContactError, check_run_inputs, planar_truth, rough_bound_or
+from explore3d.arm.urdf import load_arm
 from explore3d.core.defaults import DEFAULT_A
-from explore3d.strategy.explore import ExploreConfig
+from explore3d.geometry.metrics import shape_error
+from explore3d.reconstruction.carve import carve
+from explore3d.reconstruction.hull_input import reconstruct_points
+from explore3d.strategy.explore import ExploreConfig, contact_points
+from explore3d.world.explore import explore
+from explore3d.world.skin import LOADED_FORCE_N, ideal_skin, surface_coverage
 
 __all__ = ["CompareColumn", "compare", "compare_exploration", "format_compare"]
 
@@ -48,9 +57,6 @@ class CompareColumn:
 def _column(name, points, wrap, ctx, seed) -> CompareColumn:
     """Score ``points`` (m, >= d) hulled as the pipeline does (3D: carved by the exploration's swept
     free space ``ctx["swept"]`` when it has some); ``ctx``: d, centre, radius, a, method, truth, swept."""
-    from explore3d.geometry.metrics import shape_error
-    from explore3d.reconstruction.hull_input import reconstruct_points
-    from explore3d.world.skin import surface_coverage
 
     P = np.asarray(points, dtype=float)
     P = P.reshape(len(P), -1)[:, : ctx["d"]]
@@ -58,8 +64,6 @@ def _column(name, points, wrap, ctx, seed) -> CompareColumn:
         hull = reconstruct_points(P, wrap, ctx["centre"], ctx["radius"], a=ctx["a"], method=ctx["method"])
         est = hull.shape()
         if ctx["d"] == 3 and ctx.get("swept"):
-            from explore3d.reconstruction.carve import carve
-
             est = carve(est, ctx["swept"]).mesh
         err = shape_error(est, ctx["truth"], seed=seed)
         e, iou, ch = err.percent, err.iou, err.chamfer_m
@@ -89,8 +93,6 @@ def localisation_scores(exploration, skin, radius_m: float = 3.0e-3, used_only: 
         :func:`explore3d.feeling.contacts.contact_uncertainty_m`), with their counts ``n_true_links``,
         ``n_true_loaded`` and ``n_true_1n``.
     """
-    from explore3d.world.skin import LOADED_FORCE_N
-
     ex = exploration
     cs = ex.contacts.select(ex.contacts.used) if used_only else ex.contacts
     truth = {}  # (wrap, attempt, moment index) -> rows of the skin
@@ -163,11 +165,6 @@ def compare(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: flo
         ``n_contacts`` (detections), ``skin_contacts`` and ``skin_loaded`` (skin points),
         ``explore_s`` and ``skin_s`` (wall-clock seconds).
     """
-    import dataclasses
-
-    from explore3d.arm.urdf import load_arm
-    from explore3d.world.explore import explore
-    from explore3d.app.pipeline import check_run_inputs, rough_bound_or
 
     check_run_inputs(mesh, load_arm(arm), config, a, "exponential", centre, radius)
     config = dataclasses.replace(config, points="contacts")
@@ -181,12 +178,7 @@ def compare_exploration(ex, mesh, centre, radius: float, a: float = DEFAULT_A, *
     :func:`compare` does (same dict), without exploring again: e.g. to keep ``ex``'s contacts and
     free space.  ``centre`` (3,) and ``radius`` (m) are the rough bound it was explored with;
     ``skin``: ``ideal_skin(ex, mesh)`` when already computed (else computed here)."""
-    import dataclasses
-    import time
 
-    from explore3d.strategy.explore import contact_points
-    from explore3d.app.pipeline import NoContactError, planar_truth
-    from explore3d.world.skin import ideal_skin
 
     config = ex.config
     if config.points != "contacts":

@@ -10,6 +10,7 @@ import html
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 from explore3d.core.io import atomic_path, atomic_write_bytes, atomic_write_text
 
@@ -205,8 +206,6 @@ def read_points_ply(path, with_properties: bool = False):
 
     Raises ValueError (missing, unreadable, or no points) naming the problem.
     """
-    import trimesh
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"point file not found: {path}; check the path")

@@ -16,19 +16,28 @@ All coordinates are metres in the world frame (= the object's own frame).
 """
 from __future__ import annotations
 
+import logging
 import tempfile
 from pathlib import Path
 
 import numpy as np
+import shapely
+import trimesh
+from scipy.spatial.transform import Rotation
 
+from explore3d.arm.kinematics import link_transforms
+from explore3d.arm.urdf import arm_urdf
 from explore3d.core.io import atomic_path
+from explore3d.core.quiet import quiet_c_output
+from explore3d.geometry.metrics import boundary_samples
+from explore3d.geometry.sdf import SignedDistance
 
 
 def _plt():
-    import matplotlib
+    import matplotlib  # start-up: matplotlib kept out of explore3d --help's; the Agg backend first
 
     matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # start-up: as above
 
     return plt
 
@@ -50,8 +59,6 @@ def _rings(geom):
 
 def arm_polylines(exploration):
     """Per wrap, per attempt: (n_links + 1, 2) joint and tip positions in the world x-y plane, metres."""
-    from explore3d.arm.kinematics import link_transforms
-
     out = []
     spec = exploration.spec
     for wrap in exploration.attempts:
@@ -150,16 +157,12 @@ def views_figure(estimate_mesh, truth_mesh, path, points=None, err=None, title: 
 def scene_image(truth_mesh, spec, attempt, width: int = 480, height: int = 360) -> np.ndarray:
     """(height, width, 3) uint8 RGB image from PyBullet's TinyRenderer (DIRECT client) of the truth
     mesh (metres, world frame) and the arm ``spec`` at ``attempt.q`` (rad) on ``attempt.T_world_base``."""
-    from explore3d.core.quiet import quiet_c_output
-
     with quiet_c_output():  # PyBullet's banners: import, connect, the renderer
         return _scene_image(truth_mesh, spec, attempt, width, height)
 
 
 def _scene_image(truth_mesh, spec, attempt, width: int, height: int) -> np.ndarray:
-    import pybullet as p
-
-    from explore3d.arm.urdf import arm_urdf
+    import pybullet as p  # start-up: kept out of explore3d --help's
 
     cid = p.connect(p.DIRECT)
     try:
@@ -173,8 +176,6 @@ def _scene_image(truth_mesh, spec, attempt, width: int, height: int) -> np.ndarr
             urdf.write_text(arm_urdf(spec))
             arm = p.loadURDF(str(urdf), useFixedBase=True, physicsClientId=cid)
         T = np.asarray(attempt.T_world_base, dtype=float)
-        from scipy.spatial.transform import Rotation
-
         quat_xyzw = Rotation.from_matrix(T[:3, :3]).as_quat()  # PyBullet order (x, y, z, w)
         p.resetBasePositionAndOrientation(arm, T[:3, 3].tolist(), quat_xyzw.tolist(), physicsClientId=cid)
         revolute = [j for j in range(p.getNumJoints(arm, physicsClientId=cid))
@@ -253,16 +254,11 @@ def signed_distance_mm(estimate, truth) -> np.ndarray:
         vertices; evaluation only: it reads the truth).
     """
     if hasattr(estimate, "exterior") or hasattr(estimate, "geoms"):
-        import shapely
-
-        from explore3d.geometry.metrics import boundary_samples
-
         P = boundary_samples(estimate, 400)
         pts = shapely.points(P)
         d = shapely.distance(truth.boundary, pts)
         inside = shapely.contains(truth, pts)
         return 1e3 * np.where(inside, -d, d)
-    from explore3d.geometry.sdf import SignedDistance
 
     return 1e3 * SignedDistance(truth)(np.asarray(estimate.vertices, dtype=float))
 
@@ -284,8 +280,6 @@ def subdivided(mesh, divisor: float = SD_EDGE_DIVISOR):
     """A copy of ``mesh`` (trimesh, metres) with no edge longer than its largest extent / ``divisor``
     (:func:`trimesh.remesh.subdivide_to_size`, at most 8 rounds): the same surface, with vertices
     inside its faces where a picture colours per vertex."""
-    import trimesh
-
     V, F = trimesh.remesh.subdivide_to_size(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces),
                                             max_edge=float(np.max(mesh.extents)) / divisor, max_iter=8)
     return trimesh.Trimesh(V, F, process=False)
@@ -301,7 +295,7 @@ def signed_distance_figure(estimate, truth, path, title: str = "", views=VIEWS[:
     Planar (shapely polygons): the estimate's boundary samples coloured, the truth's outline in
     grey.  ``thumbnail``: one small view (the sweep report's table).  A symmetric diverging scale
     (:data:`SD_CMAP`, +- :data:`SD_PERCENTILE` of |distance|) with a colorbar in mm."""
-    from matplotlib.colors import Normalize
+    from matplotlib.colors import Normalize  # start-up: matplotlib kept out of explore3d --help's
 
     plt = _plt()
     planar = hasattr(estimate, "exterior") or hasattr(estimate, "geoms")
@@ -315,8 +309,6 @@ def signed_distance_figure(estimate, truth, path, title: str = "", views=VIEWS[:
     fig = plt.figure(figsize=(3.4, 2.8) if thumbnail else (5.0 * n + 1.0, 5.0))
     axes = []
     if planar:
-        from explore3d.geometry.metrics import boundary_samples
-
         ax = fig.add_subplot(1, 1, 1)
         for ring in _rings(truth):
             ax.plot(ring[:, 0], ring[:, 1], "-", color="0.5", lw=1.0)
@@ -328,14 +320,14 @@ def signed_distance_figure(estimate, truth, path, title: str = "", views=VIEWS[:
             ax.set_ylabel("y [m]")
         axes.append(ax)
     else:
-        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+        from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # start-up: matplotlib kept out of explore3d --help's
 
         V, F = np.asarray(estimate.vertices, dtype=float), np.asarray(estimate.faces)
         face_sd = sd[F].mean(axis=1)
         lo = np.minimum(V.min(0), truth.bounds[0])
         hi = np.maximum(V.max(0), truth.bounds[1])
         c, r = (lo + hi) / 2.0, float((hi - lo).max()) / 2.0
-        from mpl_toolkits.mplot3d.art3d import Line3DCollection
+        from mpl_toolkits.mplot3d.art3d import Line3DCollection  # start-up: matplotlib kept out of explore3d --help's
 
         sharp = truth.face_adjacency_angles > np.radians(TRUTH_EDGE_ANGLE_DEG)
         edges = truth.vertices[truth.face_adjacency_edges[sharp]]  # (k, 2, 3): the truth's outline
@@ -387,8 +379,6 @@ def run_pictures(out, exploration, estimate, truth, mesh, err) -> list[str]:
         try:
             scene = scene_image(mesh, exploration.spec, last)
         except Exception as exc:  # pybullet errors are plain `error`; a picture is never worth a failed run
-            import logging
-
             logging.getLogger(__name__).warning("no rendered scene: %s", exc)
     if exploration.config.mode == "planar":
         planar_figure(exploration, estimate, truth, out / "figure.png", err=err)
@@ -404,7 +394,7 @@ def run_pictures(out, exploration, estimate, truth, mesh, err) -> list[str]:
     signed_distance_figure(estimate, truth, out / "signed_distance.png", title=f"signed distance{_err_title(err)}")
     names.append("signed_distance.png")
     if scene is not None:
-        import matplotlib.image as mpimg
+        import matplotlib.image as mpimg  # start-up: matplotlib kept out of explore3d --help's
 
         with atomic_path(out / "scene.png") as tmp:
             mpimg.imsave(tmp, scene, format="png")

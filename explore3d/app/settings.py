@@ -286,3 +286,9 @@ def explore_config(opts: dict):
         return ExploreConfig(**kw)
     except (TypeError, ValueError) as exc:
         raise UsageError(str(exc)) from None
+
+
+#: Settings a sweep's grid may sweep (explore3d.app.sweep), each an option of ``explore3d run`` (see ``explore3d run --help``).
+SWEEP_KEYS = ("a", "angles", "arm", "attempts", "base_step", "clearance", "collision_margin", "directions",
+              "encircle", "face_offset", "fingers", "method", "mirrored", "mode", "n_along", "n_height", "noise_seed", "offsets",
+              "points", "probes", "scene", "seed", "sensing", "size")

@@ -57,13 +57,36 @@ from __future__ import annotations
 import contextlib
 import glob
 import hashlib
+import itertools
 import json
 import math
+import multiprocessing as mp
 import os
+import pickle
+import signal
 import sqlite3
+import tempfile
 import time
+from collections import deque
 from dataclasses import dataclass, field
+from multiprocessing.connection import wait
 from pathlib import Path
+
+import numpy as np
+import trimesh
+from tqdm import tqdm
+
+from explore3d import __version__
+from explore3d.app.export import write_mesh
+from explore3d.app.report import OutputConfig, run_and_report
+from explore3d.app.settings import _BOOL_OPTIONS, RUN_DEFAULTS, RUN_OPTIONS, SWEEP_KEYS, UsageError, explore_config
+from explore3d.arm.urdf import load_arm
+from explore3d.core.interrupt import import_optional
+from explore3d.core.io import atomic_write_bytes, json_text
+from explore3d.core.lifeline import die_with_parent
+from explore3d.core.quiet import STDERR, quiet_c_output
+from explore3d.core.validate import read_toml
+from explore3d.world.objects import BUILTIN_OBJECTS, PYBULLET_DATA_PREFIX, _resolve_path, load_object
 
 __all__ = ["SWEEP_KEYS", "TIMING_COLUMNS", "RunTask", "SweepBusyError", "SweepDatabaseError", "SweepStore",
            "SweepSummary", "execute", "parse_grid", "read_grid_file", "read_rows", "resolve_objects", "run_sweep",
@@ -90,11 +113,6 @@ TIMING_COLUMNS = ("time_s", "timings")
 
 #: Report entries that are wall-clock times: kept out of a row's ``report`` (in ``timings``).
 _REPORT_TIMING_KEYS = ("timings", "wall_s")
-
-#: Settings a grid may sweep, each an option of ``explore3d run`` (see ``explore3d run --help``).
-SWEEP_KEYS = ("a", "angles", "arm", "attempts", "base_step", "clearance", "collision_margin", "directions",
-              "encircle", "face_offset", "fingers", "method", "mirrored", "mode", "n_along", "n_height", "noise_seed", "offsets",
-              "points", "probes", "scene", "seed", "sensing", "size")
 
 #: Settings left out of the canonical settings when they have these values (what ``run`` does
 #: without them), so ``--grid a=0.05`` and no ``a`` at all are the same combination.
@@ -135,8 +153,6 @@ _COLUMNS = ("key", "object", "mesh_sha256", "settings_sha256", "seed", "version"
 # --- settings -------------------------------------------------------------------------------------
 
 def _checker(key: str):
-    from explore3d.app.settings import _BOOL_OPTIONS, RUN_OPTIONS
-
     if key in _BOOL_OPTIONS:
         return "bool"
     return RUN_OPTIONS[key]
@@ -146,8 +162,6 @@ def parse_setting(key: str, value, *, from_text: bool):
     """One grid value of ``key`` as the run takes it (numbers checked as ``explore3d run`` checks
     them; ``arm`` files made absolute).  ``from_text``: ``value`` is a command-line string.
     Raises ValueError (one line) for an unknown key or a bad value."""
-    from explore3d.app.settings import UsageError
-
     key = str(key).replace("-", "_")
     if key not in SWEEP_KEYS:
         raise ValueError(f"unknown sweep setting {key!r}; valid keys: {', '.join(SWEEP_KEYS)}")
@@ -196,8 +210,6 @@ def parse_grid(items) -> dict:
 def read_grid_file(path) -> dict:
     """A grid from a TOML file: top-level ``KEY = value`` or ``KEY = [v1, v2, ...]`` (keys of
     :data:`SWEEP_KEYS`), checked as :func:`parse_grid` checks flags."""
-    from explore3d.core.validate import read_toml
-
     path = Path(path)
     data = read_toml(path, "grid file", "--grid-file")
     grid = {}
@@ -227,8 +239,6 @@ def _sha256_text(text: str) -> str:
 def settings_grid(grid: dict) -> list[dict]:
     """Every combination of ``grid`` (key -> list of values), in the grid's key order, the last
     key varying fastest; one empty combination for an empty grid.  Duplicates are dropped."""
-    import itertools
-
     keys = list(grid)
     out, seen = [], set()
     for combo in itertools.product(*(grid[k] for k in keys)):
@@ -251,8 +261,6 @@ def resolve_objects(specs) -> list[str]:
     paths, ``pybullet_data:PATTERN`` as ``pybullet_data:`` + each matching path in pybullet_data's
     folder; globs expanded (sorted).  Order kept, duplicates dropped.  Raises ValueError (one line)
     for a name that is neither, or a glob that matches nothing."""
-    from explore3d.world.objects import BUILTIN_OBJECTS, PYBULLET_DATA_PREFIX
-
     if isinstance(specs, str):
         specs = [specs]
     out: list[str] = []
@@ -263,7 +271,7 @@ def resolve_objects(specs) -> list[str]:
         if spec in BUILTIN_OBJECTS:
             found = [spec]
         elif spec.startswith(PYBULLET_DATA_PREFIX):
-            import pybullet_data
+            import pybullet_data  # start-up: pybullet's data package, only for pybullet_data: names
 
             root = Path(pybullet_data.getDataPath())
             pattern = spec[len(PYBULLET_DATA_PREFIX):]
@@ -296,10 +304,6 @@ def resolve_objects(specs) -> list[str]:
 def mesh_sha256(name: str) -> str:
     """sha256 of an object: of the file's bytes, or (built-in) of its float64 vertices and int64
     faces (C order)."""
-    import numpy as np
-
-    from explore3d.world.objects import BUILTIN_OBJECTS, _resolve_path
-
     if name in BUILTIN_OBJECTS:
         m = BUILTIN_OBJECTS[name].builder()
         h = hashlib.sha256(np.ascontiguousarray(m.vertices, dtype="<f8").tobytes())
@@ -353,8 +357,6 @@ def sweep_tasks(objects, grid: dict | None = None, size: float | None = None, jo
     """The tasks of a sweep: :func:`resolve_objects` x :func:`settings_grid` (objects outer).
     ``size`` (metres, the longest side, as ``explore3d run --size``) applies where the grid sets
     none."""
-    from explore3d import __version__
-
     grid = dict(grid or {})
     for k in grid:
         if k not in SWEEP_KEYS:
@@ -363,8 +365,6 @@ def sweep_tasks(objects, grid: dict | None = None, size: float | None = None, jo
         size = parse_setting("size", size, from_text=False)
         grid.setdefault("size", [size])
     if "arm" in grid:
-        from explore3d.arm.urdf import load_arm
-
         for arm in grid["arm"]:
             load_arm(arm)  # a one-line ValueError for an unknown arm, before any run
     names = resolve_objects(objects)
@@ -387,8 +387,6 @@ def _fault_hook(task: RunTask) -> None:
         if obj != task.object:
             continue
         if what == "segfault":
-            import signal
-
             os.kill(os.getpid(), signal.SIGSEGV)
         elif what == "raise":
             raise RuntimeError(f"injected failure (EXPLORE3D_SWEEP_FAULT={spec})")
@@ -405,19 +403,9 @@ def execute(task: RunTask, vertices, faces, arm=None) -> dict:
 
     Returns ``{"status": "ok", "report": dict, "files": {name: bytes}, "time_s": s}`` or
     ``{"status": "failed", "reason": one line, "time_s": s}``; never raises an Exception."""
-    import tempfile
-
     t0 = time.perf_counter()
     try:
         _fault_hook(task)
-        import numpy as np
-        import trimesh
-
-        from explore3d.core.quiet import quiet_c_output
-        from explore3d.arm.urdf import load_arm
-        from explore3d.app.settings import RUN_DEFAULTS, explore_config
-        from explore3d.app.pipeline import OutputConfig, run_and_report
-
         s = task.settings
         opts = {**{k: RUN_DEFAULTS[k] for k in ("arm", "mode", "a", "method")}, **s, "jobs": task.jobs}
         try:
@@ -619,8 +607,6 @@ def _row(task: RunTask, outcome: dict, truth: str | None) -> dict:
            "n_points": None, "n_contacts": None, "report": None, "run_dir": None, "truth": truth,
            "time_s": float(outcome.get("time_s", math.nan)), "timings": None}
     if outcome["status"] == "ok":
-        from explore3d.core.io import json_text
-
         rep = json.loads(json_text(outcome["report"]))
         timing = {k: rep.pop(k) for k in _REPORT_TIMING_KEYS if k in rep}
         for k in ("percent_error", "iou", "chamfer_m", "hausdorff_m"):
@@ -638,10 +624,6 @@ def _row(task: RunTask, outcome: dict, truth: str | None) -> dict:
 def _child_main(task, vertices, faces, arm, result_path, parent_pid) -> None:
     """A local worker process: run one task, leave its outcome (pickle) at ``result_path``; it dies
     with the sweep's process ``parent_pid`` (:func:`explore3d.core.lifeline.die_with_parent`)."""
-    import pickle
-
-    from explore3d.core.lifeline import die_with_parent
-    from explore3d.core.io import atomic_write_bytes
 
     die_with_parent(parent_pid)
     outcome = execute(task, vertices, faces, arm)
@@ -652,8 +634,6 @@ def _exit_outcome(code) -> dict:
     """The outcome of a worker that ended with exit code ``code`` and left no result: ``failed``
     when it crashed by itself (a signal such as SIGSEGV), :data:`LOST` when it was killed from
     outside (:data:`_EXTERNAL_SIGNALS`) or exited without a result."""
-    import signal
-
     if code is not None and code < 0:
         try:
             name = signal.Signals(-code).name
@@ -671,10 +651,6 @@ def _exit_outcome(code) -> dict:
 def _local_backend(jobs, workers: int, work_dir: Path, on_start):
     """Yield (task, outcome) as runs finish: each task of ``jobs`` ((task, mesh, arm)) in a fresh
     ``spawn`` process, at most ``workers`` at once."""
-    import multiprocessing as mp
-    import pickle
-    from collections import deque
-    from multiprocessing.connection import wait
 
     ctx = mp.get_context("spawn")
     pending = deque(jobs)
@@ -714,8 +690,6 @@ def _ray_execute(task, mesh, arm):
 
 def _ray_backend(jobs, workers: int, jobs_per_run: int, address, on_start):
     """Yield (task, outcome) as Ray tasks finish (see the module docstring)."""
-    from explore3d.core.interrupt import import_optional
-
     try:
         ray = import_optional("ray")  # an interrupted import raises KeyboardInterrupt, not "ray missing"
     except (ImportError, OSError) as exc:
@@ -793,7 +767,7 @@ def sweep_lock(folder):
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     try:
-        import fcntl
+        import fcntl  # optional extra of the platform: POSIX only
     except ImportError:  # pragma: no cover - not POSIX
         yield None
         return
@@ -833,8 +807,6 @@ def _to_run(outcome, retry_failed: bool) -> bool:
 
 def _write_truth(folder: Path, task: RunTask, mesh) -> str:
     """The true mesh once per (object, size) under ``truths/``; its path relative to ``folder``."""
-    from explore3d.app.export import write_mesh
-
     name = f"truths/{_sha256_text(_canonical_json([task.mesh_sha256, task.size]))[:20]}.stl"
     if not (folder / name).is_file():
         write_mesh(mesh, folder / name, "stl")
@@ -863,8 +835,6 @@ def run_sweep(objects, out, grid: dict | None = None, *, size: float | None = No
     :class:`SweepDatabaseError` when ``out/sweep.db`` is not a sweep's database (left as it is),
     OSError when ``out`` cannot be written.
     """
-    from explore3d.world.objects import load_object
-
     if backend not in ("local", "ray"):
         raise ValueError(f"backend must be 'local' or 'ray'; got {backend!r}")
     for name, v in (("workers", workers), ("jobs_per_run", jobs_per_run)):
@@ -883,10 +853,6 @@ def run_sweep(objects, out, grid: dict | None = None, *, size: float | None = No
         stored_before = len(tasks) - len(todo)
         bar = None
         if progress:
-            from tqdm import tqdm
-
-            from explore3d.core.quiet import STDERR
-
             bar = tqdm(total=len(tasks), initial=stored_before, desc="sweep", unit="run", file=STDERR,
                        dynamic_ncols=True)
         in_hand: list[str] = []
@@ -916,8 +882,6 @@ def run_sweep(objects, out, grid: dict | None = None, *, size: float | None = No
                 continue
             arm_name = t.settings.get("arm", "default")
             if arm_name not in arms:
-                from explore3d.arm.urdf import load_arm
-
                 arms[arm_name] = load_arm(arm_name)
             jobs.append((t, mesh, arms[arm_name]))
         n_ok = n_failed = n_lost = 0
@@ -926,8 +890,6 @@ def run_sweep(objects, out, grid: dict | None = None, *, size: float | None = No
             nonlocal n_ok, n_failed, n_lost
             truth = meshes[(task.object, task.size)][1] if outcome["status"] == "ok" else None
             if outcome["status"] == "ok":
-                from explore3d.core.io import atomic_write_bytes, json_text
-
                 run_dir = folder / "runs" / task.key
                 for name, data in outcome["files"].items():
                     atomic_write_bytes(run_dir / name, data)

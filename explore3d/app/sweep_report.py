@@ -21,7 +21,17 @@ import html
 import io
 import json
 import math
+import os
+import tempfile
 from pathlib import Path
+
+import trimesh
+from shapely.geometry import Polygon
+
+from explore3d.app.pictures import _plt, _save, signed_distance_figure
+from explore3d.app.pipeline import planar_truth
+from explore3d.app.sweep import read_rows
+from explore3d.core.io import atomic_write_text
 
 __all__ = ["report_table", "swept_keys", "write_sweep_report"]
 
@@ -128,8 +138,6 @@ def error_plot(rows, path) -> Path:
     """``errors.png``: error % against each swept setting (one panel each), one line per object and
     combination of the other settings (colour per object); failures are left out.  Without a swept
     setting: the error per object."""
-    from explore3d.app.pictures import _plt, _save
-
     plt = _plt()
     ok = [r for r in rows if r["status"] == "ok"]
     keys = [k for k in swept_keys(rows)]
@@ -176,10 +184,6 @@ def error_plot(rows, path) -> Path:
 def thumbnail(folder: Path, row, path: Path) -> Path | None:
     """The estimate of ``row`` coloured by its signed distance to the truth (PNG at ``path``);
     None when the run stored no estimate (a failure) or its files are missing."""
-    import trimesh
-
-    from explore3d.app.pictures import signed_distance_figure
-
     if row["status"] != "ok" or not row["run_dir"] or not row["truth"]:
         return None
     run_dir, truth_path = folder / row["run_dir"], folder / row["truth"]
@@ -190,9 +194,6 @@ def thumbnail(folder: Path, row, path: Path) -> Path | None:
         return None
     truth = trimesh.load_mesh(truth_path)
     if planar:  # the polygon against the true section at the arm's plane, as the run scored it
-        from shapely.geometry import Polygon
-
-        from explore3d.app.pipeline import planar_truth
 
         est = Polygon(json.loads(est_path.read_text(encoding="utf-8")))
         truth = planar_truth(truth, float(report["section_z_m"]))
@@ -233,11 +234,7 @@ def write_sweep_report(folder, out=None, thumbnails: bool = True) -> list[Path]:
     read-only, :func:`explore3d.app.sweep.read_rows`).  Raises ValueError (one line) for a folder
     without a sweep, a ``sweep.db`` that is not a sweep's, or an ``out`` that cannot be written
     (checked before anything is written)."""
-    import os
-    import tempfile
 
-    from explore3d.core.io import atomic_write_text
-    from explore3d.app.sweep import read_rows
 
     folder = Path(folder)
     rows = read_rows(folder)

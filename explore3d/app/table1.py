@@ -7,7 +7,15 @@ and our default many-small-links arm for comparison.  Area errors in m^2, a = 0.
 """
 from __future__ import annotations
 
+import dataclasses
+
+from explore3d.app.pipeline import reconstruct_exploration, run
 from explore3d.core.defaults import DEFAULT_A, PAPER_A
+from explore3d.geometry.metrics import shape_error
+from explore3d.strategy.explore import ExploreConfig, contact_points
+from explore3d.world.calibration import calibrate_thickness
+from explore3d.world.objects import load_object, square
+from explore3d.world.simulated import simulated_case
 
 #: (case, paper area error m^2, paper percent) from Table I of the paper.
 PAPER_TABLE_I = {
@@ -20,9 +28,6 @@ PAPER_TABLE_I = {
 
 
 def _planar_row(case, obj, arm, directions, mirrored, attempts=4, a=PAPER_A):
-    from explore3d.strategy.explore import ExploreConfig
-    from explore3d.world.objects import load_object
-    from explore3d.app.pipeline import run
 
     res = run(load_object(obj), arm, ExploreConfig(mode="planar", directions=directions, mirrored=mirrored,
                                                  attempts=attempts, points="links"), a=a)  # the paper's rule
@@ -34,8 +39,6 @@ def _planar_row(case, obj, arm, directions, mirrored, attempts=4, a=PAPER_A):
 def table1_rows(a: float = PAPER_A, seed: int = 0) -> list[dict]:
     """The reproduced rows (list of dicts with case, arm, paper_area_error_m2, paper_percent,
     area_error_m2, percent)."""
-    from explore3d.world.objects import square
-    from explore3d.world.simulated import simulated_case
 
     rows = [
         _planar_row("Cube one direction", "cube", "paper", 1, False, a=a),
@@ -73,18 +76,10 @@ def table3d_rows(a: float = DEFAULT_A, arm="default", config=None, calibrate: bo
     face_offset_m, percent_calibrated, volume_error_calibrated_m3 (None without calibration),
     wall_s (exploration wall time, uncalibrated run).
     """
-    import dataclasses
-
-    from explore3d.strategy.explore import ExploreConfig, contact_points
-    from explore3d.geometry.metrics import shape_error
-    from explore3d.world.objects import load_object
-    from explore3d.app.pipeline import reconstruct_exploration, run
 
     config = ExploreConfig(jobs=jobs, points="links") if config is None else config
     offset = None
     if calibrate:
-        from explore3d.world.calibration import calibrate_thickness
-
         offset = calibrate_thickness(arm, config).face_offset_m
     rows = []
     for case, obj in TABLE_3D_OBJECTS:

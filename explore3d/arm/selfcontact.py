@@ -33,8 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from explore3d.arm.kinematics import link_frames_planar, link_transforms
 from explore3d.arm.spec import BASE_GAP_M, ArmSpec
-from explore3d.arm.kinematics import link_frames_planar
 
 __all__ = ["BASE", "body_rectangles", "rectangle_distances", "self_distances", "self_contact_pairs",
            "point_body_distances", "near_other_body", "SELF_CONTACT_TOLERANCE_M"]
@@ -164,8 +164,6 @@ def point_body_distances(spec: ArmSpec, q, points, T_world_base=None) -> np.ndar
     """(m, n + 1) distance, metres, from each of ``points`` (m, 3), world frame, to each body's box
     at joint angles ``q`` (n,), rad (column 0 the base block, i + 1 link i; 0 inside a box).
     ``T_world_base`` (4, 4): the base pose (None: the identity)."""
-    from explore3d.arm.kinematics import link_transforms
-
     P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     T = link_transforms(spec, q, T_world_base)  # (n, 4, 4)
     Tb = np.eye(4) if T_world_base is None else np.asarray(T_world_base, dtype=np.float64)

@@ -10,6 +10,7 @@ import re
 from pathlib import Path
 
 from explore3d.arm.spec import BASE_GAP_M, BUILTIN_ARMS, ArmSpec
+from explore3d.core.io import atomic_write_text
 
 _SPEC_TAG = "explore3d-arm-spec:"
 
@@ -68,8 +69,6 @@ def arm_urdf(spec: ArmSpec) -> str:
 
 def write_arm_urdf(spec: ArmSpec, path) -> Path:
     """Write :func:`arm_urdf` of ``spec`` to ``path`` atomically; returns the path."""
-    from explore3d.core.io import atomic_write_text
-
     path = Path(path)
     atomic_write_text(path, arm_urdf(spec))
     return path

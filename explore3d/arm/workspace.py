@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from explore3d.arm.spec import BASE_GAP_M, ArmSpec
 from explore3d.arm.kinematics import link_frames_planar
+from explore3d.arm.spec import BASE_GAP_M, ArmSpec
 
 __all__ = ["link_corners", "lowest_z", "base_lowest_z", "floor_stop", "pose_clears", "plan_lowest_z"]
 

@@ -3,11 +3,14 @@ run's set of files replaces the previous set in its folder as a whole (:class:`S
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import re
 import shutil
 import tempfile
 from pathlib import Path
+
+from explore3d.core.interrupt import deferred_signals, pid_alive
 
 
 @contextlib.contextmanager
@@ -54,7 +57,7 @@ def atomic_write_text(path, text: str) -> Path:
 
 
 def _json_default(o):
-    import numpy as np
+    import numpy as np  # start-up: the core stays light (explore3d --help loads it)
 
     if isinstance(o, np.ndarray):
         return o.tolist()
@@ -70,8 +73,6 @@ def _json_default(o):
 def json_text(obj) -> str:
     """``obj`` as indented JSON text ending in a newline (numpy arrays and scalars, enums and
     tuples converted); the one JSON writer of report.json, the command line and the scripts."""
-    import json
-
     return json.dumps(obj, indent=2, default=_json_default) + "\n"
 
 
@@ -90,7 +91,7 @@ def _locked(folder: Path):
     """An exclusive ``flock`` on ``folder`` (POSIX; elsewhere no lock): two runs into one folder
     clean and switch it one at a time."""
     try:
-        import fcntl
+        import fcntl  # optional extra of the platform: POSIX only
     except ImportError:
         yield
         return
@@ -132,8 +133,6 @@ def stale_leftovers(folder, owned, last: str = "report.json") -> list[str]:
 
     Staging folders and temporaries of live processes (another run into the same folder) are
     kept.  A pid reused by a new process keeps its leftovers until a later run."""
-    from explore3d.core.interrupt import pid_alive
-
     folder = Path(folder)
     stems = {Path(n).stem for n in owned}
     done = []
@@ -181,8 +180,6 @@ class StagedFolder:
         self.committed = False
 
     def __enter__(self):
-        from explore3d.core.interrupt import deferred_signals
-
         try:
             with deferred_signals():
                 self.folder.mkdir(parents=True, exist_ok=True)
@@ -204,8 +201,6 @@ class StagedFolder:
 
     def commit(self) -> list[str]:
         """Switch ``folder`` to the staged files (see the class); returns their names."""
-        from explore3d.core.interrupt import deferred_signals
-
         names = self.names()
         with deferred_signals(), _locked(self.folder):
             atomic_write_text(self.path / _JOURNAL, "".join(n + "\n" for n in names))

@@ -80,10 +80,10 @@ def read_toml(path, what: str, flag: str) -> dict:
             unreadable file, invalid TOML).
     """
     try:
-        import tomllib
+        import tomllib  # optional extra: the TOML reader (Python 3.11, or tomli on 3.10)
     except ModuleNotFoundError:  # Python 3.10
         try:
-            import tomli as tomllib
+            import tomli as tomllib  # optional extra: tomli on Python 3.10
         except ModuleNotFoundError:
             raise ValueError(f"{flag} needs Python 3.11 (tomllib) or pip install tomli; "
                              "pass the options as flags instead") from None

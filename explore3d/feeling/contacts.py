@@ -14,14 +14,18 @@ figures (its torque noise and resolution, its encoder's counts).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
 
+from explore3d.arm.kinematics import link_transforms
+from explore3d.arm.selfcontact import near_other_body
 from explore3d.arm.spec import ArmSpec
 from explore3d.feeling.localise import Localisation, external_torques, localise
-from explore3d.arm.selfcontact import near_other_body
+from explore3d.reconstruction.hull_input import reconstruct_points
 from explore3d.robot.sensing import SensorConfig
 
 __all__ = ["ContactSet", "localise_moment", "localise_attempts", "on_the_arm", "torque_sigma_nm", "position_sigma_m",
@@ -149,8 +153,6 @@ def on_the_arm(spec: ArmSpec, q, T_world_base, contacts) -> np.ndarray:
     other than its link and the two adjacent to it.  The interval matters: with the torques of
     only the joints up to the touched link, a face point and a corner fit alike, and the located
     point may lie millimetres from where the other body touches."""
-    from explore3d.arm.kinematics import link_transforms
-
     T = link_transforms(spec, q, T_world_base)
     w = spec.link_width / 2
     points, links, owner = [], [], []
@@ -271,10 +273,6 @@ def resolve_heights(segments, wrap, centre, radius: float, group=None, iteration
     Returns:
         (m, 3) the chosen points, world frame, metres (mid-height where a fold gave no hull).
     """
-    import trimesh
-
-    from explore3d.reconstruction.hull_input import reconstruct_points
-
     S = np.asarray(segments, dtype=float)
     wrap = np.asarray(wrap)
     group = wrap if group is None else np.asarray(group)
@@ -314,8 +312,6 @@ def contacts_for_hull(cs: ContactSet, config, centre, radius: float, plane=None,
     across the link's height by :func:`resolve_heights` (planar: the mid-height points, the
     plane's section).  The rough ``centre`` (3,) and ``radius`` (m) bound the estimate;
     ``plane`` (n_wraps,) int gives each wrap's plane (None: a plane per wrap)."""
-    import dataclasses
-
     sigma = torque_sigma_nm(config.sensors)
     u = contact_uncertainty_m(cs, sigma)
     used = (u <= max_uncertainty_m) & (cs.residual_nm <= MAX_RESIDUAL_SIGMAS * sigma) & cs.still & ~cs.self_contact

@@ -45,8 +45,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import nnls
 
+from explore3d.arm.kinematics import gravity_torques, link_transforms
 from explore3d.arm.spec import ArmSpec
-from explore3d.arm.kinematics import link_transforms
 
 __all__ = ["LocalContact", "Localisation", "localise", "external_torques", "link_outline", "KINDS", "INNER_SIDE", "INNER_SIDE_ROUNDED", "inverse_dynamics",
            "torques_of_contacts"]
@@ -165,8 +165,6 @@ class Localisation:
 def external_torques(spec: ArmSpec, q, tau_motor, T_world_base, gravity) -> np.ndarray:
     """(n,) external joint torques at a quasi-static moment: ``-(tau_motor + g(q))``, N m (the
     motor torque as reported, gravity feed-forward included)."""
-    from explore3d.arm.kinematics import gravity_torques
-
     return -(np.asarray(tau_motor, float) + gravity_torques(spec, q, T_world_base, gravity))
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 
 import numpy as np
+import trimesh
 
 from explore3d.core.tolerances import SLIVER_RTOL
 
@@ -54,6 +55,5 @@ def one_body(mesh, sliver_rtol: float = SLIVER_RTOL) -> tuple[object, tuple[floa
     keep = [p for p, s in zip(parts, small) if not s]
     if len(keep) == 1:
         return keep[0], dropped
-    import trimesh
 
     return trimesh.util.concatenate(keep), dropped

@@ -37,11 +37,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
+import trimesh
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import ConvexHull, QhullError, cKDTree
+from shapely.geometry import Polygon
 
-from explore3d.core.validate import check_points, check_positive, check_vector
 from explore3d.core.defaults import DEFAULT_A, MAX_A
+from explore3d.core.interrupt import import_optional
 from explore3d.core.tolerances import DEGENERACY_RTOL, MERGE_DISTANCE_M
+from explore3d.core.validate import check_points, check_positive, check_vector
 
 __all__ = ["InverseHull", "inverse_hull", "invert_points", "merge_close_points", "METHODS", "BACKENDS"]
 
@@ -89,9 +94,6 @@ def merge_close_points(points, distance: float = MERGE_DISTANCE_M) -> np.ndarray
     rep = np.arange(n)
     if d == 0 or n < 2:
         return rep
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
 
     pairs = cKDTree(pts).query_pairs(d, output_type="ndarray")
     if len(pairs) == 0:
@@ -198,7 +200,6 @@ class InverseHull:
         """shapely Polygon of the 2D shape (input frame, metres), counter-clockwise exterior."""
         if self.dim != 2:
             raise ValueError(f"polygon is only defined for 2D inverse hulls; this one is {self.dim}D (use .mesh)")
-        from shapely.geometry import Polygon
 
         return Polygon(self.points[self.vertices])
 
@@ -208,7 +209,6 @@ class InverseHull:
         positive volume; only the used points are kept as vertices."""
         if self.dim != 3:
             raise ValueError(f"mesh is only defined for 3D inverse hulls; this one is {self.dim}D (use .polygon)")
-        import trimesh
 
         remap = np.full(len(self.points), -1, dtype=np.int64)
         remap[self.vertices] = np.arange(len(self.vertices))
@@ -269,8 +269,6 @@ def _check_centre_inside(pts: np.ndarray, c: np.ndarray, diag: float) -> None:
 
 
 def _import_open3d():
-    from explore3d.core.interrupt import import_optional
-
     try:
         open3d = import_optional("open3d")  # optional, heavy, needs system libusb; Ctrl-C: KeyboardInterrupt
     except (ImportError, OSError) as exc:

@@ -17,9 +17,14 @@ import logging
 from dataclasses import asdict, dataclass
 
 import numpy as np
+import trimesh
+from manifold3d import Error, Manifold, Mesh64
 from scipy.spatial import cKDTree
+from shapely.geometry import MultiPolygon, Polygon
+from shapely.validation import explain_validity
 
 from explore3d.core.tolerances import FLOAT64_GEOMETRY_RTOL
+from explore3d.geometry.hull import InverseHull
 
 log = logging.getLogger(__name__)
 
@@ -79,8 +84,6 @@ def check_volume(mesh, name: str = "mesh"):
         mesh: trimesh.Trimesh, metres.
         name: how to call it in the message.
     """
-    import trimesh
-
     if not isinstance(mesh, trimesh.Trimesh):
         raise NotAVolumeError(f"{name} must be a trimesh.Trimesh; got {type(mesh).__name__}")
     if len(mesh.faces) == 0:
@@ -134,16 +137,12 @@ def boundary_samples(polygon, n_samples: int) -> np.ndarray:
 
 
 def _as_shape(x, name: str):
-    from explore3d.geometry.hull import InverseHull
-
     if isinstance(x, InverseHull):
         return x.shape()
     return x
 
 
 def _dim_of(x, name: str) -> int:
-    import trimesh
-    from shapely.geometry import MultiPolygon, Polygon
 
     if isinstance(x, (Polygon, MultiPolygon)):
         return 2
@@ -154,8 +153,6 @@ def _dim_of(x, name: str) -> int:
 
 def _check_polygon(p, name: str):
     if p.is_empty or not p.is_valid or not p.area > 0:
-        from shapely.validation import explain_validity
-
         why = "empty" if p.is_empty else ("zero area" if p.is_valid else explain_validity(p))
         raise ValueError(f"{name} must be a valid polygon with positive area; it is {why} (fix with shapely.make_valid)")
     return p
@@ -168,8 +165,6 @@ def _sizes_2d(est, truth) -> tuple[float, float, float]:
 
 
 def _to_manifold(mesh, origin: np.ndarray, name: str):
-    from manifold3d import Error, Manifold, Mesh64
-
     verts = np.ascontiguousarray(np.asarray(mesh.vertices, dtype=np.float64) - origin)
     man = Manifold(mesh=Mesh64(vert_properties=verts, tri_verts=np.asarray(mesh.faces, dtype=np.uint64)))
     if man.status() != Error.NoError:
@@ -240,8 +235,6 @@ def shape_error(estimate, truth, n_samples: int = 20000, seed: int = 0) -> Shape
         ValueError: mixed dimensions, unsupported types, invalid/empty polygons.
         NotAVolumeError: a mesh is not a closed volume.
     """
-    import trimesh
-
     est = _as_shape(estimate, "estimate")
     tru = _as_shape(truth, "truth")
     d_est, d_tru = _dim_of(est, "estimate"), _dim_of(tru, "truth")

@@ -25,8 +25,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import trimesh
 
 from explore3d.arm.spec import ArmSpec
+from explore3d.core.interrupt import import_optional
 
 __all__ = ["BOX_FACES", "DETECTION_CONFIG_PITCH_M", "PYBULLET_MESH_MARGIN_M", "SignedDistance", "TRAJECTORY_PITCH_M",
            "box_min_distance", "box_surface_points", "face_min_distance"]
@@ -73,8 +75,6 @@ class SignedDistance:
         self.centre = (V.min(0) + V.max(0)) / 2.0
         self._scene = None
         if backend in ("auto", "open3d"):
-            from explore3d.core.interrupt import import_optional
-
             try:
                 o3d = import_optional("open3d")  # optional, heavy; an interrupted import raises KeyboardInterrupt
             except (ImportError, OSError) as exc:
@@ -106,8 +106,6 @@ class SignedDistance:
                 t3 = self._o3d.core.Tensor((flat[inside] - self.centre).astype(np.float32))
                 d[inside] = self._scene.compute_signed_distance(t3, nsamples=3).numpy().astype(np.float64)
         else:
-            import trimesh  # noqa: PLC0415
-
             d = -trimesh.proximity.signed_distance(self.mesh, flat)
         return d.reshape(P.shape[:-1])
 

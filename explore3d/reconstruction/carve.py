@@ -17,7 +17,11 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
+from scipy import ndimage
+from skimage.measure import marching_cubes
 
+from explore3d.core.interrupt import import_optional
 from explore3d.geometry.bodies import one_body
 from explore3d.reconstruction.freespace import is_free
 
@@ -74,8 +78,6 @@ def _grid_points(bounds: np.ndarray, voxel_m: float):
 def carve(mesh, areas, voxel_m: float = DEFAULT_VOXEL_M, opening_voxels: int = DEFAULT_OPENING_VOXELS) -> CarveResult:
     """Cut the swept free space (``areas``: :class:`~explore3d.reconstruction.freespace.SweptArea` list) out of
     the closed estimate ``mesh`` (trimesh, metres); see the module docstring."""
-    import trimesh
-    from scipy import ndimage
 
     if voxel_m <= 0:
         raise ValueError(f"voxel_m must be > 0; got {voxel_m}")
@@ -93,7 +95,6 @@ def carve(mesh, areas, voxel_m: float = DEFAULT_VOXEL_M, opening_voxels: int = D
                                      iterations=opening_voxels)
     if not cut.any():
         return unchanged
-    from skimage.measure import marching_cubes
 
     # the tool reaches a voxel beyond the estimate where the cut meets its surface: no skin is left
     # on the estimate's faces (the space outside it is cut for nothing)
@@ -122,8 +123,6 @@ def carve(mesh, areas, voxel_m: float = DEFAULT_VOXEL_M, opening_voxels: int = D
 def _contains(mesh, points: np.ndarray) -> np.ndarray:
     """Inside test of a closed mesh: open3d's occupancy when installed (measured about 8x faster),
     else trimesh's ray test (Embree when embreex is installed)."""
-    from explore3d.core.interrupt import import_optional
-
     try:
         o3d = import_optional("open3d")
     except (ImportError, OSError):  # an interrupted import raises KeyboardInterrupt instead

@@ -2,8 +2,8 @@
 
 The paper's estimate is the inverse hull of the contacts about the rough centre: a surface star-
 shaped about that centre, so any surface hidden from it (a U-channel's slot walls seen from a
-centre in the slot, a notch's far side) cannot be represented, and :func:`~explore3d.pipeline.
-hull_input_mask` drops such contacts as outliers.  Three alternatives on the same contacts and
+centre in the slot, a notch's far side) cannot be represented, and :func:`~explore3d.reconstruction.
+hull_input.hull_input_mask` drops such contacts as outliers.  Three alternatives on the same contacts and
 free space, each a closed mesh (trimesh, metres, world frame):
 
 * :func:`convex_carved`: the convex hull of the contacts, carved by the swept free space
@@ -23,40 +23,38 @@ Pure functions on numpy arrays; lengths in metres.  The paper's inverse hull sta
 from __future__ import annotations
 
 import numpy as np
+import trimesh
+from scipy import ndimage
+from scipy.spatial import cKDTree
+from skimage.measure import marching_cubes
 
 from explore3d.core.defaults import DEFAULT_A, ESTIMATOR_NAMES
+from explore3d.geometry.hull import inverse_hull
+from explore3d.reconstruction.carve import _contains, _grid_points, carve
+from explore3d.reconstruction.freespace import is_free
+from explore3d.reconstruction.hull_input import reconstruct_points, within_bound
 
 __all__ = ["ESTIMATORS", "estimate", "single_centre", "convex_carved", "multi_centre", "implicit_surface", "interior_centres"]
 
 
 def _carve(mesh, swept):
-    from explore3d.reconstruction.carve import carve
-
     return carve(mesh, swept).mesh if swept else mesh
 
 
 def single_centre(points, wrap, centre, radius: float, swept=(), a: float = DEFAULT_A):
     """The pipeline's estimate: the inverse hull about the rough ``centre`` (3,) of the ``points``
     (m, 3) that :func:`~explore3d.reconstruction.hull_input.hull_input_mask` keeps (``wrap`` (m,) ids), carved."""
-    from explore3d.reconstruction.hull_input import reconstruct_points
-
     return _carve(reconstruct_points(points, wrap, centre, radius, a=a).mesh, swept)
 
 
 def convex_carved(points, centre, radius: float, swept=()):
     """Convex hull of the ``points`` (m, 3) within ``radius`` of ``centre``, carved by ``swept``."""
-    import trimesh
-
-    from explore3d.reconstruction.hull_input import within_bound
-
     P = np.asarray(points, dtype=float)
     return _carve(trimesh.convex.convex_hull(P[within_bound(P, centre, radius)]), swept)
 
 
 def _voxels(mesh, voxel_m: float):
     """Inside mask (nx, ny, nz) of ``mesh`` on the carving lattice, and the lattice's origin (3,)."""
-    from explore3d.reconstruction.carve import _contains, _grid_points
-
     origin, n, centres = _grid_points(np.asarray(mesh.bounds, dtype=float), voxel_m)
     return _contains(mesh, centres).reshape(n), origin
 
@@ -65,8 +63,6 @@ def interior_centres(mesh, n: int = 6, voxel_m: float = 2.0e-3, min_depth_fracti
     """(k, 3), k <= n: points deep inside the closed ``mesh``: voxels whose distance to the outside
     is at least ``min_depth_fraction`` of the deepest's, spread by farthest-point sampling from the
     deepest (each next centre the one farthest from those chosen)."""
-    from scipy import ndimage
-
     inside, origin = _voxels(mesh, voxel_m)
     depth = ndimage.distance_transform_edt(np.pad(inside, 1))[1:-1, 1:-1, 1:-1]
     if depth.max() <= 0:
@@ -84,10 +80,6 @@ def interior_centres(mesh, n: int = 6, voxel_m: float = 2.0e-3, min_depth_fracti
 def multi_centre(points, wrap, centre, radius: float, swept=(), a: float = DEFAULT_A, n_centres: int = 6):
     """Union of the inverse hulls of all ``points`` within ``radius`` of ``centre`` about
     :func:`interior_centres` of the carved single-centre estimate, carved by ``swept``."""
-    import trimesh
-
-    from explore3d.geometry.hull import inverse_hull
-    from explore3d.reconstruction.hull_input import within_bound
 
     P = np.asarray(points, dtype=float)
     P = P[within_bound(P, centre, radius)]
@@ -108,14 +100,7 @@ def implicit_surface(points, normals, wrap, centre, radius: float, swept=(), a: 
                      voxel_m: float = 1.5e-3, k: int = 8, reach_m: float = 0.015):
     """Zero set of a signed distance fitted to the contacts, their outward ``normals`` (m, 3) and the
     swept free space (see the module docstring)."""
-    import trimesh
-    from scipy import ndimage
-    from scipy.spatial import cKDTree
-    from skimage.measure import marching_cubes
 
-    from explore3d.reconstruction.carve import _contains, _grid_points
-    from explore3d.reconstruction.freespace import is_free
-    from explore3d.reconstruction.hull_input import within_bound
 
     P = np.asarray(points, dtype=float)
     N = np.asarray(normals, dtype=float)

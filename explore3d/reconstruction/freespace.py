@@ -19,12 +19,14 @@ from the curl and the object it wraps.  Frames: ``T_world_base`` (4, 4) maps bas
 """
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 
 import numpy as np
 
-from explore3d.arm.spec import ArmSpec
 from explore3d.arm.kinematics import link_frames_planar
+from explore3d.arm.spec import ArmSpec
+from explore3d.core.io import atomic_write_bytes
 
 __all__ = ["SweptArea", "swept_area", "is_free", "save_swept", "load_swept", "DEFAULT_PIXEL_M", "DEFAULT_MARGIN_M"]
 
@@ -163,10 +165,6 @@ def is_free(areas, points) -> np.ndarray:
 def save_swept(areas, path) -> None:
     """Write swept areas to ``path`` (.npz, atomically): what ``explore3d reconstruct --free-space``
     reads to carve an estimate as the run did."""
-    import io
-
-    from explore3d.core.io import atomic_write_bytes
-
     arrays = {"T_world_base": np.array([a.T_world_base for a in areas]).reshape(-1, 4, 4),
               "origin_m": np.array([a.origin_m for a in areas]).reshape(-1, 2),
               "pixel_m": np.array([a.pixel_m for a in areas], dtype=float),

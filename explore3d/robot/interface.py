@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from explore3d.arm.spec import ArmSpec
+from explore3d.core.io import atomic_write_bytes
 from explore3d.robot.sensing import SensorConfig
 
 __all__ = [
@@ -200,8 +201,6 @@ class RobotLog:
 
     def save(self, path) -> Path:
         """Write the log to ``path`` (.npz) atomically; returns the path."""
-        from explore3d.core.io import atomic_write_bytes
-
         path = Path(path)
         meta = {"format_version": LOG_FORMAT_VERSION, "spec": asdict(self.spec), "dt_s": self.dt,
                 "gravity_m_s2": [float(g) for g in self.gravity]}

@@ -19,9 +19,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
 
 from explore3d.core.validate import check_field
-from explore3d.geometry.directions import WrapPose, wrap_pose
+from explore3d.geometry.directions import WrapPose, fibonacci_sphere, wrap_pose
 
 __all__ = ["ProbeConfig", "unsupported_targets", "probe_poses", "finger_poses"]
 
@@ -94,8 +96,6 @@ def unsupported_targets(mesh, contacts, min_distance_m: float, exclusion_m: floa
         points (t, 3), outward unit normals (t, 3), and each one's distance to the nearest
         contact (t,), m; farthest first.
     """
-    import trimesh
-    from scipy.spatial import cKDTree
 
     P, fi = trimesh.sample.sample_surface(mesh, samples, seed=seed)
     N = mesh.face_normals[fi]
@@ -171,10 +171,6 @@ def finger_poses(targets, normals, estimate, centre, radius: float, spec, gap_m:
     finger.  The arm curls towards the surface: the wrap frame's +y is the normal's opposite
     projected across ``e``.  Pure geometry on the estimate (what the robot believes).
     """
-    import trimesh
-    from scipy.spatial import cKDTree
-
-    from explore3d.geometry.directions import fibonacci_sphere
 
     centre = np.asarray(centre, dtype=float)
     L = spec.n_links * spec.link_length

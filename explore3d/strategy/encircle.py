@@ -25,14 +25,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from explore3d.core.validate import check_field
-from explore3d.arm.spec import ArmSpec
-from explore3d.feeling.detect import ContactBand, SweepDetector
 from explore3d.arm.kinematics import gravity_torques, link_frames_planar
-from explore3d.robot.interface import JointCommand, JointReading, Robot
 from explore3d.arm.selfcontact import SELF_CONTACT_TOLERANCE_M, self_contact_pairs, self_distances
+from explore3d.arm.spec import ArmSpec
 from explore3d.arm.workspace import floor_stop
-
+from explore3d.core.validate import check_field
+from explore3d.feeling.detect import ContactBand, SweepDetector
+from explore3d.robot.interface import JointCommand, JointReading, Robot
 
 #: A detection is a self-contact when any of the sweep's last this many readings put a carried body
 #: against one the joint does not carry (the detector's two-step mean, the sensing delay and a

@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from explore3d.arm.kinematics import link_surface_points
 from explore3d.arm.spec import ArmSpec
 from explore3d.reconstruction.freespace import is_free
-from explore3d.arm.kinematics import link_surface_points
 
 __all__ = ["DEFAULT_DEPTH_M", "DEFAULT_MIN_SEGMENTS", "contact_segments", "deep_free", "moved_after"]
 

@@ -52,16 +52,30 @@ import time
 from pathlib import Path
 
 import numpy as np
+import trimesh
+from scipy.spatial.transform import Rotation
 
-from explore3d.arm.spec import ArmSpec
-from explore3d.feeling.detect import ContactBand, SweepDetector
-from explore3d.strategy.encircle import SELF_CONTACT_WINDOW_STEPS, Controller, ControlConfig, StopReason, run_attempt, sweep_joint, sweep_speeds, sweep_torque_limits
+from explore3d import __version__
 from explore3d.arm.kinematics import link_transforms
 from explore3d.arm.selfcontact import self_contact_pairs
+from explore3d.arm.spec import ArmSpec
+from explore3d.core.io import atomic_write_text
+from explore3d.core.settings import SimConfig
+from explore3d.feeling.detect import ContactBand, SweepDetector
+from explore3d.geometry.directions import planar_wrap_poses, spatial_wrap_poses
 from explore3d.robot.sensing import SensorConfig
+from explore3d.strategy.encircle import (
+    SELF_CONTACT_WINDOW_STEPS,
+    ControlConfig,
+    Controller,
+    StopReason,
+    run_attempt,
+    sweep_joint,
+    sweep_speeds,
+    sweep_torque_limits,
+)
 from explore3d.world.objects import CALIBRATION_SPHERE_RADIUS_M, calibration_sphere
 from explore3d.world.sim import ArmSimulation
-from explore3d.core.settings import SimConfig
 
 __all__ = ["calibrate_band", "cached_band", "contact_tolerance_m", "self_contact_tolerance_m", "box_sphere_distance",
            "BAND_PROTOCOL_VERSION",
@@ -104,8 +118,6 @@ LINK_SAMPLE_PITCH_M = 2.0e-3
 
 def calibration_block_pose() -> np.ndarray:
     """(4, 4) ``T_world_block`` of the calibration block (centred at the origin, turned)."""
-    from scipy.spatial.transform import Rotation
-
     T = np.eye(4)
     T[:3, :3] = Rotation.from_rotvec(CALIBRATION_BLOCK_ROTVEC).as_matrix()
     return T
@@ -113,8 +125,6 @@ def calibration_block_pose() -> np.ndarray:
 
 def calibration_block():
     """The known calibration block as a closed trimesh in its world pose."""
-    import trimesh
-
     return trimesh.creation.box(extents=CALIBRATION_BLOCK_EXTENTS_M, transform=calibration_block_pose())
 
 
@@ -222,8 +232,6 @@ def _free_motion(robot, spec: ArmSpec, control: ControlConfig, bases, self_tol: 
 
 
 def _impact_poses(spec: ArmSpec, centre, radius: float, planar: bool):
-    from explore3d.geometry.directions import planar_wrap_poses, spatial_wrap_poses
-
     r = 1.05 * radius
     if planar:
         return planar_wrap_poses(centre, r, spec.link_width, IMPACT_DIRECTIONS_PLANAR)
@@ -323,8 +331,6 @@ def _cache_dir() -> Path:
 
 def band_cache_key(spec: ArmSpec, control: ControlConfig, sim: SimConfig, sensors: SensorConfig, planar: bool) -> str:
     """The hash naming a setting's cached band (everything the calibration depends on)."""
-    from explore3d import __version__
-
     sim_d = dataclasses.asdict(sim)
     if not sim.mass_error:  # an exact model: the key of the settings before the mass error existed
         sim_d.pop("mass_error")
@@ -356,8 +362,6 @@ def cached_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim: Si
     else from the factory calibration shipped with the package (the default arms' default
     settings, :func:`factory_band_path`), else measured and stored in the disk cache
     (``provenance["cache"]`` says which)."""
-    from explore3d.core.io import atomic_write_text
-
     key = band_cache_key(spec, control, sim, sensors, planar)
     path = _cache_dir() / "bands" / f"{key}.json"
     for where in (path, factory_band_path(key)):

@@ -36,7 +36,11 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from explore3d.core.validate import check_positive, check_vector
+from explore3d.geometry.sdf import SignedDistance
+from explore3d.strategy.explore import ExploreConfig
+from explore3d.world.explore import explore
 from explore3d.world.objects import CALIBRATION_SPHERE_RADIUS_M, calibration_sphere
+from explore3d.world.quality import contact_point_gaps
 
 __all__ = [
     "CALIBRATION_SPHERE_RADIUS_M",
@@ -137,10 +141,6 @@ def calibrate_thickness(arm="default", config=None, calibration_object=None, rej
         :class:`ThicknessCalibration`; apply it with
         ``dataclasses.replace(config, face_offset=cal.face_offset_m)``.
     """
-    from explore3d.strategy.explore import ExploreConfig
-    from explore3d.world.explore import explore
-    from explore3d.world.quality import contact_point_gaps
-    from explore3d.geometry.sdf import SignedDistance
 
     t0 = time.perf_counter()
     config = ExploreConfig() if config is None else config

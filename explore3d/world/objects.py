@@ -378,7 +378,7 @@ def load_object(spec, scale: float | None = None, size: float | None = None) -> 
 
 def _resolve_path(spec) -> Path:
     if isinstance(spec, str) and spec.startswith(PYBULLET_DATA_PREFIX):
-        import pybullet_data
+        import pybullet_data  # start-up: pybullet's data package, only for pybullet_data: names
 
         name = spec[len(PYBULLET_DATA_PREFIX):]
         root = Path(pybullet_data.getDataPath())
@@ -532,8 +532,6 @@ def calibration_sphere(radius_m: float = CALIBRATION_SPHERE_RADIUS_M, centre_m=(
     centred at ``centre_m`` (3,), world frame, as a closed trimesh.  With 4 subdivisions and 60 mm
     its facets lie at most 0.03 mm inside the ideal sphere; the calibration measures against the
     mesh itself (the surface the simulation sees)."""
-    import trimesh
-
     r = check_positive(radius_m, "radius_m")
     c = check_vector(centre_m, "centre_m", 3)
     if not isinstance(subdivisions, int) or isinstance(subdivisions, bool) or not 1 <= subdivisions <= 6:

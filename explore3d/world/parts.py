@@ -7,6 +7,7 @@ import os
 import tempfile
 
 import numpy as np
+import trimesh
 
 from explore3d.core.interrupt import deferred_signals
 from explore3d.core.quiet import quiet_c_output
@@ -83,8 +84,6 @@ def convex_parts(mesh) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 def _union(parts):
-    import trimesh  # kept out of explore3d --help's start-up
-
     meshes = [trimesh.Trimesh(V, F, process=True).convex_hull for V, F in parts]
     if len(meshes) == 1:
         return meshes[0]

@@ -11,16 +11,26 @@ joint swept at each recorded step is recovered from the references (:func:`swept
 """
 from __future__ import annotations
 
+import dataclasses
 import math
+import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from explore3d.arm.kinematics import link_surface_points, link_transforms
 from explore3d.arm.spec import ArmSpec
 from explore3d.feeling.detect import SweepDetector
-from explore3d.arm.kinematics import link_transforms
-from explore3d.geometry.sdf import (DETECTION_CONFIG_PITCH_M, PYBULLET_MESH_MARGIN_M, TRAJECTORY_PITCH_M, SignedDistance,
-                                    _as_sdf, box_min_distance, face_min_distance)
+from explore3d.geometry.sdf import (
+    DETECTION_CONFIG_PITCH_M,
+    PYBULLET_MESH_MARGIN_M,
+    TRAJECTORY_PITCH_M,
+    SignedDistance,
+    _as_sdf,
+    box_min_distance,
+    face_min_distance,
+)
+from explore3d.strategy.explore import contact_points
 from explore3d.world.replay import replay_wrap
 
 __all__ = [
@@ -296,10 +306,6 @@ def exploration_points_3d(exploration) -> list[dict]:
     of its contact-flagged links, :func:`explore3d.strategy.explore.contact_points`).  Planar explorations store x-y only; the height is restored from
     the kinematics (the points lie in the arm's plane).  Every stored point is checked against
     :func:`explore3d.arm.kinematics.link_surface_points` of its attempt's joint angles and config."""
-    import dataclasses
-
-    from explore3d.strategy.explore import contact_points
-    from explore3d.arm.kinematics import link_surface_points
 
     ex, cfg, spec = exploration, exploration.config, exploration.spec
     if cfg.points != "links":  # the hull took localised contacts: the link points of the same attempts
@@ -467,8 +473,6 @@ def contact_quality(exploration, mesh, false_tol_m: float = FALSE_DETECTION_TOL_
             (None: the smallest stride that keeps it to ``max_trajectory_configs`` configurations).
             Detection steps and the touch search of detected sweeps always use every step.
     """
-    import time
-
     t0 = time.perf_counter()
     for name, v in (("false_tol_m", false_tol_m), ("touch_tol_m", touch_tol_m)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):

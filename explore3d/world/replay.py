@@ -13,8 +13,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from explore3d.robot.interface import ForwardingRobot, JointCommand, JointReading, Robot
 from explore3d.geometry.sdf import SignedDistance
+from explore3d.robot.interface import ForwardingRobot, JointCommand, JointReading, Robot
 from explore3d.strategy.encircle import run_wrap
 from explore3d.world.sim import ArmSimulation
 

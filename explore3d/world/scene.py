@@ -15,6 +15,7 @@ Units: metres, kilograms, seconds, radians.  Poses are (4, 4) homogeneous transf
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import os
@@ -22,12 +23,17 @@ import tempfile
 from dataclasses import asdict, dataclass
 
 import numpy as np
+import trimesh
+from scipy.spatial.transform import Rotation
 
-from explore3d.core.validate import check_field
-
+from explore3d.arm.urdf import load_arm
 from explore3d.core.defaults import SCENE_NAMES  # the named scenes of ``--scene``
-from explore3d.core.settings import SceneConfig
+from explore3d.core.settings import SceneConfig, SimConfig
+from explore3d.core.validate import check_field
+from explore3d.strategy.encircle import ControlConfig
+from explore3d.strategy.explore import ExploreConfig
 from explore3d.world.parts import _union, convex_parts
+from explore3d.world.sim import ArmSimulation
 
 __all__ = ["SceneConfig", "SceneSetup", "SCENE_NAMES", "convex_parts", "settle_scene", "pose_drift"]
 
@@ -77,8 +83,6 @@ class SceneSetup:
 
 
 def _pose(client, body) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
     pos, quat = client.getBasePositionAndOrientation(body)
     T = np.eye(4)
     T[:3, :3] = Rotation.from_quat(quat).as_matrix()
@@ -107,11 +111,6 @@ def settle_scene(mesh, config: SceneConfig, spec=None, sim=None) -> SceneSetup:
         spec, sim: the arm (:class:`~explore3d.arm.spec.ArmSpec`, default the built-in default arm)
             and the physics settings (:class:`~explore3d.core.settings.SimConfig`) of the world.
     """
-    import trimesh
-
-    from explore3d.arm.urdf import load_arm
-    from explore3d.world.sim import ArmSimulation
-    from explore3d.core.settings import SimConfig
 
     if not isinstance(config, SceneConfig):
         raise ValueError(f"scene must be a SceneConfig; got {type(config).__name__}")
@@ -168,11 +167,6 @@ def scene_explore_config(name: str = "table", **kw):
     (the ideal scene's) no longer held the arm's joints as it does in free space: every joint of a
     wrap in free space 11 mm above the cube fired a contact (24 of 24; 0 with the table's friction
     0, 0 with the object moved away, 0 with the sequential-impulse solver and its own band)."""
-    import dataclasses
-
-    from explore3d.strategy.encircle import ControlConfig
-    from explore3d.strategy.explore import ExploreConfig
-    from explore3d.core.settings import SimConfig
 
     scene = SceneConfig.named(name)
     if name == "table":

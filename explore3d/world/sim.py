@@ -14,19 +14,22 @@ from __future__ import annotations
 
 import functools
 import os
+import sys
 import tempfile
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
-from explore3d.core.validate import check_field
 from explore3d.arm.spec import ArmSpec
+from explore3d.arm.urdf import arm_urdf
+from explore3d.core.interrupt import deferred_signals
+from explore3d.core.quiet import quiet_c_output
 from explore3d.core.settings import SimConfig
+from explore3d.core.validate import check_field
 from explore3d.robot.interface import JointCommand, JointReading, Robot, Workcell
 from explore3d.robot.sensing import SensorConfig, Sensors
-from explore3d.arm.urdf import arm_urdf
-
-
+from explore3d.world.parts import parts_obj_text
 
 
 def mass_scales(n: int, mass_error: float, seed: int) -> np.ndarray:
@@ -40,8 +43,6 @@ def mass_scales(n: int, mass_error: float, seed: int) -> np.ndarray:
 
 def _pose_from_T(T) -> tuple[list, list]:
     """(position (3,), quaternion (x, y, z, w)) of a (4, 4) homogeneous transform."""
-    from scipy.spatial.transform import Rotation
-
     T = np.asarray(T, dtype=np.float64)
     if T.shape != (4, 4) or not np.isfinite(T).all():
         raise ValueError(f"a base transform must be a finite (4, 4) matrix; got shape {T.shape}")
@@ -61,15 +62,11 @@ class ArmSimulation(Workcell):
     """
 
     def __init__(self, spec: ArmSpec, vertices=None, faces=None, config: SimConfig = SimConfig(), scene=None):
-        from explore3d.core.quiet import quiet_c_output
-
         self.spec = spec
         self.config = config
         with quiet_c_output():  # PyBullet's C-level banners: build time, argv[0]=, solver switch
-            import pybullet
+            import pybullet  # start-up: kept out of explore3d --help's (and loaded quietly: its banner)
             from pybullet_utils import bullet_client
-
-            from explore3d.core.interrupt import deferred_signals
 
             with deferred_signals():  # a Ctrl-C inside would leave a half-made client whose __del__ complains
                 self._p = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
@@ -217,10 +214,7 @@ class ArmSimulation(Workcell):
     # --- the scene's bodies (built once) ------------------------------------------------------------
     def _resting_object(self, scene, margin) -> int:
         """A free body of the scene's convex parts at its settled pose, mass ``scene.mass_kg``."""
-        import pybullet
-
-        from explore3d.world.parts import parts_obj_text
-
+        pybullet = sys.modules["pybullet"]  # imported quietly by __init__
         p = self._p
         fd, path = tempfile.mkstemp(suffix=".obj", prefix="explore3d_object_")
         try:
@@ -238,8 +232,7 @@ class ArmSimulation(Workcell):
 
     def _table(self, scene) -> int:
         """A static box whose top face is the plane z = ``scene.table_z``, 2 m square under the object."""
-        import pybullet
-
+        pybullet = sys.modules["pybullet"]  # imported quietly by __init__
         p = self._p
         c = np.asarray(scene.truth.bounds, float).mean(axis=0)
         col = p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[1.0, 1.0, 0.05])

@@ -24,11 +24,11 @@ import shapely
 import trimesh
 from shapely.geometry import Polygon
 
-from explore3d.core.validate import check_positive
 from explore3d.core.defaults import PAPER_A
+from explore3d.core.tolerances import SURFACE_ATOL_M
+from explore3d.core.validate import check_positive
 from explore3d.geometry.hull import InverseHull, inverse_hull
 from explore3d.geometry.metrics import ShapeError, shape_error
-from explore3d.core.tolerances import SURFACE_ATOL_M
 
 __all__ = ["SimulatedCase", "discretise_links", "random_links_on_boundary", "simulated_case"]
 

@@ -19,8 +19,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
 
 from explore3d.robot.interface import ForwardingRobot, JointCommand, JointReading, Robot
+from explore3d.strategy.encircle import run_wrap
+from explore3d.world.sim import ArmSimulation
 
 __all__ = ["LOADED_FORCE_N", "SkinContacts", "ideal_skin", "surface_coverage", "COVERAGE_RADII_M"]
 
@@ -111,8 +115,6 @@ def ideal_skin(exploration, mesh) -> SkinContacts:
     """Every arm-object contact point PyBullet reports at the readings of ``exploration``
     (detection steps and final holds), re-running its wraps on ``mesh`` (the same closed trimesh,
     world frame).  Costs about as long as the exploration itself (one process)."""
-    from explore3d.strategy.encircle import run_wrap
-    from explore3d.world.sim import ArmSimulation
 
     cfg = exploration.config
     rows = {k: [] for k in ("p", "f", "l", "w", "a", "kind", "mi")}
@@ -152,12 +154,8 @@ def surface_coverage(truth, touches, radii_m=COVERAGE_RADII_M, n_samples: int = 
     Returns:
         one fraction in [0, 1] per radius.
     """
-    from scipy.spatial import cKDTree
-
     T = np.asarray(touches, dtype=float)
     if hasattr(truth, "faces"):
-        import trimesh
-
         S = trimesh.sample.sample_surface(truth, n_samples, seed=seed)[0]
     else:
         ring = truth.exterior
