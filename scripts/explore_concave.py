@@ -7,7 +7,7 @@ visible from it are filled: these errors show how much.  One sub-folder of --out
 """
 from pathlib import Path
 
-from explore_mesh import explore_object, one_line_errors, options
+from explore_mesh import default_out, explore_object, one_line_errors, options
 
 from explore3d import load_object
 
@@ -15,7 +15,7 @@ CONCAVE = ("l_block", "u_channel", "star_prism")
 
 if __name__ == "__main__":
     args = options(__doc__.splitlines()[0]).parse_args()
-    out = Path(args.out or "runs/concave")
+    out = Path(default_out("concave", args))
     with one_line_errors("explore_concave"):
         rows = [explore_object(name, load_object(name), args, out / name) for name in CONCAVE]
     print(f"\n{'object':<12} {'error %':>8} {'IoU':>6} {'Hausdorff mm':>13}")
