@@ -18,7 +18,7 @@ from shapely.ops import unary_union
 from explore3d.arm.urdf import load_arm
 from explore3d.core.defaults import DEFAULT_A
 from explore3d.core.validate import check_positive, check_vector
-from explore3d.geometry.hull import _check_method, check_a
+from explore3d.geometry.hull import check_method, check_a
 from explore3d.geometry.metrics import check_volume, shape_error
 from explore3d.reconstruction.carve import carve
 from explore3d.reconstruction.hull_input import (
@@ -258,7 +258,7 @@ def check_run_inputs(mesh, spec, config, a, method, centre, radius) -> None:
                          "simplify it (e.g. trimesh's simplify_quadric_decimation) first")
     check_volume(mesh, "mesh")
     check_a(a)
-    _check_method(method)
+    check_method(method)
     _, radius = rough_bound_or(mesh, centre, radius)
     if radius > spec.reach:
         raise ValueError(f"the object's rough radius {radius:.3g} m exceeds the arm's length {spec.reach:.3g} m ({spec.name}: "

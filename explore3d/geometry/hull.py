@@ -114,7 +114,8 @@ def check_a(a) -> float:
     return a
 
 
-def _check_method(method) -> str:
+def check_method(method) -> str:
+    """``method`` if it is one of :data:`METHODS` (the inversion kernels), else a ValueError naming them."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
     return method
@@ -139,7 +140,7 @@ def invert_points(points, centre, a: float = DEFAULT_A, method: str = "exponenti
     pts = check_points(points, "points")
     c = check_vector(centre, "centre", pts.shape[1])
     a = check_a(a)
-    method = _check_method(method)
+    method = check_method(method)
     rel = pts - c
     r = np.linalg.norm(rel, axis=1)
     scale = np.max(np.ptp(pts, axis=0)) if len(pts) > 1 else 0.0
@@ -357,7 +358,7 @@ def inverse_hull(
     if len(all_pts) < need:
         raise ValueError(f"points needs at least {need} points in {d}D for a {d}D hull; got {len(all_pts)}")
     a = check_a(a)
-    method = _check_method(method)
+    method = check_method(method)
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}; got {backend!r}")
     if backend == "open3d" and d != 3:

@@ -35,7 +35,7 @@ from explore3d.robot.sensing import SensorConfig
 __all__ = [
     "JointCommand", "JointReading", "Robot", "RobotLog", "ForwardingRobot", "RecordingRobot", "LogRobot",
     "LogMismatchError",
-    "LOG_FORMAT_VERSION", "Workcell",
+    "LOG_FORMAT_VERSION", "Workcell", "LogWorkcell",
 ]
 
 
@@ -119,11 +119,12 @@ class Workcell(abc.ABC):
     steps: int
 
     @abc.abstractmethod
-    def robot(self, sensors: SensorConfig = SensorConfig(), seed_key=None) -> Robot:
-        """The :class:`Robot` of this cell, its servos read as ``sensors`` says (a simulated cell's
-        sensor model; a real one may ignore it); ``seed_key`` (a tuple of ints, or None) seeds
-        the sensor noise of a simulated cell (a wrap's index: results independent of the order
-        and the number of processes)."""
+    def robot(self, sensors: SensorConfig = SensorConfig(), wrap: int | None = None) -> Robot:
+        """The :class:`Robot` of this cell for wrap number ``wrap`` of an exploration (None: not
+        for a wrap), its servos read as ``sensors`` says (a simulated cell's sensor model; a real
+        one may ignore it).  A simulated cell seeds its sensor noise with the wrap's number, so
+        results do not depend on the order of the wraps or the number of processes; a
+        :class:`LogWorkcell` plays that wrap's log."""
 
     def close(self) -> None:
         """Release the cell (a simulator's client, a connection)."""
@@ -366,3 +367,48 @@ class LogRobot(Robot):
                 raise LogMismatchError(f"motion {self._motion}, log row {i}: the command's {name} differs from the log's")
         self._i = i
         return self._reading()
+
+
+class LogWorkcell(Workcell):
+    """A workcell of recorded wraps: the robot of wrap ``i`` plays ``logs[i]`` back
+    (:class:`LogRobot`, which checks that every command is the recorded one).  A strategy run on
+    it repeats a recorded exploration (a simulated one's :attr:`Exploration.logs
+    <explore3d.strategy.explore.Exploration.logs>`, or a real arm's logs, one :class:`RobotLog`
+    per wrap) without the world that made it.  Picklable.
+
+    Args:
+        logs: one :class:`RobotLog` per wrap, in wrap order.
+        atol, check_tau_ff: as :class:`LogRobot`'s.
+    """
+
+    def __init__(self, logs, atol: float = 1e-12, check_tau_ff: bool = True):
+        self.logs = tuple(logs)
+        if not self.logs:
+            raise ValueError("LogWorkcell needs at least one RobotLog (one per wrap); got none")
+        specs = {log.spec for log in self.logs}
+        if len(specs) != 1:
+            raise ValueError(f"LogWorkcell's logs must all be of one arm; got {len(specs)} different ArmSpecs")
+        self.spec = self.logs[0].spec
+        self.steps = 0
+        self._atol, self._check_ff = atol, check_tau_ff
+
+    def robot(self, sensors: SensorConfig = SensorConfig(), wrap: int | None = None) -> Robot:
+        if wrap is None or not 0 <= wrap < len(self.logs):
+            raise ValueError(f"LogWorkcell holds the logs of wraps 0..{len(self.logs) - 1}; asked for wrap {wrap!r}")
+        return _CountingRobot(LogRobot(self.logs[wrap], self._atol, self._check_ff), self)
+
+    def __call__(self) -> "LogWorkcell":
+        """The factory protocol: each call opens a fresh cell over the same logs."""
+        return LogWorkcell(self.logs, self._atol, self._check_ff)
+
+
+class _CountingRobot(ForwardingRobot):
+    """Counts the control steps a :class:`LogWorkcell`'s robot plays into the cell's ``steps``
+    (one physics step per control step, as the simulated arm's)."""
+
+    def __init__(self, robot: Robot, cell: LogWorkcell):
+        super().__init__(robot)
+        self._cell = cell
+
+    def on_step(self, command, reading) -> None:
+        self._cell.steps += 1

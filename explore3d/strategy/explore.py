@@ -351,7 +351,7 @@ def _wrap_in(world, args):
     index, T, band, config, bound, floor_z = args
     spec = world.spec
     steps0 = world.steps
-    robot = world.robot(config.sensors, seed_key=(0, index))
+    robot = world.robot(config.sensors, wrap=index)
     rec = RecordingRobot(robot) if config.record else robot
     angles = AngleRecorder(rec) if config.free_space else rec
     atts = run_wrap(angles, T, band, attempts=config.attempts, base_step=config.base_step, cfg=config.control,

@@ -145,12 +145,13 @@ class ArmSimulation(Workcell):
         self._axis = np.array([0.0, 0.0, 1.0])
         self._state = p.saveState()
 
-    def robot(self, sensors: SensorConfig = SensorConfig(), seed_key=None) -> "SimRobot":
+    def robot(self, sensors: SensorConfig = SensorConfig(), wrap: int | None = None) -> "SimRobot":
         """The :class:`~explore3d.robot.interface.Robot` interface of the simulated arm, read through
-        ``sensors``; ``seed_key`` (None: not reseeded) seeds its noise (:meth:`SimRobot.reseed`)."""
+        ``sensors``; for wrap number ``wrap`` its noise is seeded with ``(0, wrap)``
+        (:meth:`SimRobot.reseed`; None: not reseeded)."""
         robot = SimRobot(self, sensors)
-        if seed_key is not None:
-            robot.reseed(seed_key)
+        if wrap is not None:
+            robot.reseed((0, wrap))
         return robot
 
     # --- the robot's actuators and sensors (used by SimRobot only) --------------------------------
