@@ -31,7 +31,7 @@ _EXPORTS = {
     "reconstruct_exploration": "app.pipeline", "run": "app.pipeline", "write_result": "app.report",
     "ControlConfig": "strategy.encircle", "SimConfig": "core.settings", "SensorConfig": "robot.sensing",
     "Robot": "robot.interface", "RobotLog": "robot.interface", "RecordingRobot": "robot.interface",
-    "LogRobot": "robot.interface", "Workcell": "robot.interface",
+    "LogRobot": "robot.interface", "Workcell": "robot.interface", "LogWorkcell": "robot.interface",
     "ContactBand": "feeling.detect", "cached_band": "world.band",
     "ThicknessCalibration": "world.calibration", "calibrate_thickness": "world.calibration",
     "ContactQuality": "world.quality", "contact_quality": "world.quality",
