@@ -19,10 +19,15 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import logging
 import math
+import os
+import signal
 import sys
+import tempfile
+import threading
 from pathlib import Path
 
 from explore3d.app.settings import (
@@ -40,6 +45,9 @@ from explore3d.app.settings import (
     resolve_run_options,
 )
 from explore3d.core.defaults import DEFAULT_A, ESTIMATOR_NAMES, MAX_A, SCENE_NAMES
+from explore3d.core.interrupt import INTERRUPTED, check_interrupt, sigint_handler
+from explore3d.core.io import atomic_write_text, json_text
+from explore3d.core.quiet import STDERR, quiet_c_output
 
 PROG = "explore3d"
 
@@ -327,8 +335,6 @@ def _check_object_name(spec: str) -> None:
 
 def _prepare_out_dir(out: Path) -> None:
     """Create ``out`` and check it is writable, before any simulation is spent."""
-    import tempfile  # start-up: kept out of explore3d --help's
-
     try:
         out.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=out):
@@ -339,8 +345,6 @@ def _prepare_out_dir(out: Path) -> None:
 
 
 def _dump(obj) -> str:
-    from explore3d.core.io import json_text  # start-up: kept out of explore3d --help's
-
     return json_text(obj)
 
 
@@ -356,8 +360,6 @@ def cmd_run(args) -> int:
     if (opts.get("calibrate") or opts.get("face_offset")) and config.points != "links":
         raise UsageError("--calibrate and --face-offset correct the paper's link points; the localised contacts (the "
                          "default) lie on the links' surfaces already: add --points links, or drop them")
-
-    from explore3d.core.quiet import STDERR, quiet_c_output  # start-up: kept out of explore3d --help's
 
     with quiet_c_output():  # PyBullet's banners (import, connect, solver switch, renderer)
         from explore3d.app.pipeline import NoContactError, ReconstructionError, check_run_inputs
@@ -378,8 +380,6 @@ def cmd_run(args) -> int:
         from explore3d.world.objects import load_object
 
         mesh = load_object(opts["object"], scale=opts.get("scale"), size=opts.get("size"))
-        from explore3d.core.interrupt import check_interrupt  # start-up: kept out of explore3d --help's
-
         check_interrupt()  # a Ctrl-C an import swallowed (trimesh's optional imports catch everything)
         log.info("object %s: extents %s m", opts["object"], np.round(mesh.extents, 4).tolist())
         check_run_inputs(mesh, spec, config, opts["a"], opts["method"], opts.get("centre"), opts.get("radius"))
@@ -432,7 +432,6 @@ def cmd_reconstruct(args) -> int:
         read_points_ply,
         write_mesh,
     )
-    from explore3d.core.io import atomic_write_text
     from explore3d.geometry.hull import resolve_centre
     from explore3d.reconstruction.hull_input import hull_input_mask, reconstruct_points
 
@@ -563,16 +562,12 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from explore3d.core.quiet import quiet_c_output  # start-up: kept out of explore3d --help's
-
     _check_object_name(args.object)
     opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs", "probes", "fingers",
                                           "encircle")
             if getattr(args, k) is not None}
     config = explore_config({**opts, "probes": 0} if args.no_free_space else opts)
     if args.no_free_space:
-        import dataclasses  # start-up: kept out of explore3d --help's
-
         config = dataclasses.replace(config, free_space=False)
     with quiet_c_output():
         from explore3d.app.compare import compare, format_compare
@@ -605,9 +600,7 @@ def cmd_sweep(args) -> int:
     stderr counting the failed combinations, if any.  Exit code 0 when at least one combination is
     stored as ok, 1 when every one failed (or the sweep could not start: folder busy, not a sweep's
     database, not writable), 2 for a usage error."""
-    import os  # start-up: kept out of explore3d --help's
-
-    from explore3d.app.sweep import (
+    from explore3d.app.sweep import (  # start-up: kept out of explore3d --help's
         SweepBusyError,
         SweepDatabaseError,
         parse_grid,
@@ -660,7 +653,6 @@ def cmd_table1(args) -> int:
         from explore3d.app import table1  # start-up: kept out of explore3d --help's
     except ImportError as exc:
         raise RunError(f"explore3d.app.table1 is not available ({exc}); update explore3d") from None
-    from explore3d.core.quiet import quiet_c_output  # start-up: kept out of explore3d --help's
 
     kw = {k: getattr(args, k) for k in ("a", "seed") if getattr(args, k) is not None}
     with quiet_c_output():  # PyBullet's banners would come before the table (or the JSON) on stdout
@@ -686,9 +678,7 @@ def cmd_table1(args) -> int:
 
 def arm_spec_from_args(args):
     """The :class:`ArmSpec` of ``explore3d arm``: ``--base`` with the given fields replaced."""
-    import dataclasses  # start-up: kept out of explore3d --help's
-
-    from explore3d.arm.urdf import load_arm
+    from explore3d.arm.urdf import load_arm  # start-up: kept out of explore3d --help's
 
     try:
         base = load_arm(args.base)
@@ -731,8 +721,6 @@ def _setup_logging(verbose: int) -> None:
     """Log records of explore3d at WARNING (INFO with -v, DEBUG with -vv) to the terminal's stderr,
     also inside :func:`~explore3d.core.quiet.quiet_c_output` (whose block points fd 2 at /dev/null: the
     handler writes to whatever ``sys.stderr`` is at the time, which the block keeps on the terminal)."""
-    from explore3d.core.quiet import STDERR  # start-up: kept out of explore3d --help's
-
     level = logging.WARNING if not verbose else (logging.INFO if verbose == 1 else logging.DEBUG)
     logger = logging.getLogger("explore3d")
     logger.setLevel(level)
@@ -753,8 +741,6 @@ def _quiet_interrupt_unraisable(hook):
     """A ``sys.unraisablehook`` that drops the KeyboardInterrupt of a Ctrl-C that landed in a
     ``__del__`` or a callback (the run honours it at its next check), and once interrupted every
     such message (what the unwinding leaves half-made objects to say); the rest go to ``hook``."""
-    from explore3d.core.interrupt import INTERRUPTED  # start-up: kept out of explore3d --help's
-
     def f(unraisable):
         if INTERRUPTED[0] or isinstance(unraisable.exc_value, KeyboardInterrupt):
             return
@@ -769,11 +755,6 @@ def _interrupt_handling():
     nothing.  Only in the main thread; the previous handler and hook are restored, and the flag is
     cleared (library calls after ``main`` in the same process are not taken for interrupted); the
     yielded dict's ``"interrupted"`` says whether a SIGINT came."""
-    import signal  # start-up: kept out of explore3d --help's
-    import threading
-
-    from explore3d.core.interrupt import INTERRUPTED, sigint_handler
-
     INTERRUPTED[0] = False
     state = {"interrupted": False}
     old_hook = sys.unraisablehook
@@ -806,8 +787,6 @@ def main(argv=None) -> int:
 
 
 def _main(argv) -> int:
-    from explore3d.core.interrupt import INTERRUPTED  # start-up: kept out of explore3d --help's
-
     parser = build_parser()
     try:
         try:
