@@ -532,12 +532,13 @@ def test_public_names_are_lazy():
     """``import explore3d`` is light; each public name loads on first use, ``explore`` stays the function
     even after its submodule is imported, and ``dir``/``__all__`` list every name."""
     code = ("import sys, explore3d; light = sorted(m for m in %r if m in sys.modules); "
-            "import explore3d.strategy.explore; from explore3d import explore, run, __all__; import explore3d as e; "
+            "import explore3d.strategy.explore, explore3d.world.explore; from explore3d import explore, run, __all__; "
+            "import explore3d as e; "
             "print(light, callable(explore) and explore.__module__, run.__module__, "
             "all(n in dir(e) and getattr(e, n) is not None for n in __all__))" % (HEAVY,))
     r = _python("-c", code)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["[]", "explore3d.strategy.explore", "explore3d.app.pipeline", "True"]
+    assert r.stdout.split() == ["[]", "explore3d.world.explore", "explore3d.app.pipeline", "True"]
     r = _python("-c", "import explore3d; explore3d.nonesuch")
     assert r.returncode == 1 and "has no attribute 'nonesuch'" in r.stderr
 
