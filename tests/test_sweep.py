@@ -210,6 +210,25 @@ def test_killed_sweep_rerun_loses_nothing(setup, reference, tmp_path, capsys):
         except ProcessLookupError:  # it had finished: the assertion below says so
             pass
         proc.wait()
+    # the killed sweep's lock released, not only its main process reaped: a child caught between
+    # fork and exec holds the lock's file until it dies too, and on loaded cores that can be after
+    # proc.wait() returned (a fresh-clone .ci/run was refused "another sweep is running")
+    import fcntl
+
+    deadline = time.monotonic() + 60
+    fd = os.open(out / "sweep.lock", os.O_RDWR)
+    try:
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                fcntl.flock(fd, fcntl.LOCK_UN)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    pytest.fail("the killed sweep's lock was still held 60 s after SIGKILL")
+                time.sleep(0.05)
+    finally:
+        os.close(fd)
     before = read_rows(out)
     assert len(before) == 1, "the sweep was not killed part-way"
     assert main(argv) == 0
