@@ -280,7 +280,7 @@ ORACLE_FREE_TABLE = textwrap.dedent("""
     from explore3d.app.pipeline import run
     from explore3d.world.scene import scene_explore_config, settle_scene
     arm = ArmSpec(name="small12", n_links=12, link_length=0.025)
-    cfg = scene_explore_config("table", table_heights=3, table_angles=3, directions=4, angles=1)
+    cfg = scene_explore_config("table", spec=arm, table_heights=3, table_angles=3, directions=4, angles=1)
     m = cube(0.04)
     setup = settle_scene(m, cfg.scene, arm, cfg.sim)  # the evaluation's setup may read the pose
     names = {names!r}

@@ -43,7 +43,8 @@ def test_the_table_scene_config_states_every_idealisation_it_drops():
     cfg = scene_explore_config("table")
     sc = cfg.scene
     assert sc.table and sc.resting and sc.persistent and sc.friction == 0.5 and sc.density == 500.0
-    assert cfg.sim.mass_error == 0.05 and cfg.control == ControlConfig.gentle()
+    assert cfg.sim.mass_error == 0.05 and cfg.control.tip_speed == ControlConfig.gentle().tip_speed
+    assert cfg.control.ramp_time > ControlConfig.gentle().ramp_time  # lengthened to keep within the force budget
     assert SceneConfig().ideal and not sc.ideal
     assert ExploreConfig().scene == SceneConfig()  # the main command's default stays the ideal scene
 
@@ -218,7 +219,7 @@ def _small_table_run(density):
     from explore3d.world.explore import explore
     from explore3d.world.scene import SceneWatch
 
-    cfg = scene_explore_config("table", table_heights=1, table_angles=6, directions=1)
+    cfg = scene_explore_config("table", spec=SMALL, table_heights=1, table_angles=6, directions=1)
     cfg = dataclasses.replace(cfg, scene=dataclasses.replace(cfg.scene, density=density))
     m = cube(0.04)
     setup = settle_scene(m, cfg.scene, SMALL, cfg.sim)

@@ -28,6 +28,7 @@ from explore3d.reconstruction.hull_input import (
 )
 from explore3d.reconstruction.tabletop import cut_at_table, support_points
 from explore3d.strategy.explore import Exploration, ExploreConfig, rough_bound
+from explore3d.strategy.motion import carry_back
 from explore3d.world.explore import explore
 from explore3d.world.objects import cross_section
 from explore3d.world.scene import settle_scene
@@ -311,6 +312,8 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
             "or a correct rough bound (centre=/radius=, --centre/--radius)",
             exploration=ex,
         )
+    if config.scene.register_moved:
+        ex = carry_back(ex, centre, radius, a=a)
     try:
         hull = reconstruct_exploration(ex, centre, radius, a=a, method=method)
     except ValueError as exc:

@@ -282,7 +282,7 @@ def explore_config(opts: dict):
         if opts.get("encircle") == "curl-back":
             kw["curl_back"] = CurlBack()
         if opts.get("scene", "ideal") != "ideal":
-            return scene_explore_config(opts["scene"], **kw)
+            return scene_explore_config(opts["scene"], spec=opts.get("arm") or "default", **kw)
         return ExploreConfig(**kw)
     except (TypeError, ValueError) as exc:
         raise UsageError(str(exc)) from None

@@ -109,6 +109,18 @@ class SceneConfig:
         friction: Coulomb coefficient between the arm's links and the object; None: the physics
             settings' :attr:`~explore3d.core.settings.SimConfig.friction` (0 by default).
         table_friction: Coulomb coefficient between the object and the table.
+        least_mass_kg: the lightest object the robot expects to meet, kg (told to the robot): the
+            table scene's sweeps press at most half the static friction that holds it
+            (:func:`explore3d.strategy.encircle.force_budget_n`; default 0.1 kg at friction 0.5:
+            0.25 N).
+        rolling_friction_m: rolling resistance between the object and the table, m: the lever
+            arm of the normal force that resists rolling (PyBullet's ``rollingFriction``: the
+            resisting torque is at most this times the normal force).  PyBullet's default 0 lets
+            a ball roll for ever.  The table scene's 1 mm: wood on wood 1.5 mm, a polymer on
+            steel 0.8 mm (engineering tables of the lever arm of rolling friction).
+        spinning_friction_m: resistance to spinning about the contact normal, m (PyBullet's
+            ``spinningFriction``, same units): about the friction coefficient times the contact
+            patch's radius; the table scene's 0.5 mm (friction 0.5, a patch of about 1 mm).
         restitution: of the object (0: contacts do not bounce).
         persistent: one world for the whole run, the wraps in sequence (the object stays where
             the arm left it); False: every wrap starts from the settled scene (wraps may then run
@@ -124,6 +136,10 @@ class SceneConfig:
             (3 of the first 3 joints of a wrap, against 0 of 3 at 0.2).
         redo_moved: in a persistent world, a wrap after which the object seems to have moved
             (:mod:`explore3d.strategy.motion`) is run once more from the same pose.
+        register_moved: on a table, the points and swept space gathered after such a motion are
+            carried back onto the estimate of those before it (a planar rigid registration,
+            :func:`explore3d.strategy.motion.carry_back`) before the hull; the flagged wraps' own are
+            dropped.  False: every point is hulled where it was touched.
     """
 
     table: bool = False
@@ -131,15 +147,19 @@ class SceneConfig:
     density: float = 500.0
     friction: float | None = None
     table_friction: float = 0.5
+    least_mass_kg: float = 0.1
+    rolling_friction_m: float = 0.0
+    spinning_friction_m: float = 0.0
     restitution: float = 0.0
     persistent: bool = False
     settle_time: float = 3.0
     table_clearance: float = 0.003
     contact_erp: float | None = None
     redo_moved: bool = True
+    register_moved: bool = True
 
     def __post_init__(self):
-        for name in ("table", "resting", "persistent", "redo_moved"):
+        for name in ("table", "resting", "persistent", "redo_moved", "register_moved"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"SceneConfig.{name} must be True or False; got {getattr(self, name)!r}")
         if self.resting and not self.table:
@@ -149,6 +169,9 @@ class SceneConfig:
         if self.friction is not None:
             check_field(self, "friction", 0, "(or None)")
         check_field(self, "table_friction", 0)
+        check_field(self, "least_mass_kg", 0, "kg", strict=True)
+        check_field(self, "rolling_friction_m", 0, "m")
+        check_field(self, "spinning_friction_m", 0, "m")
         check_field(self, "restitution", 0, hi=1)
         check_field(self, "settle_time", 0, "s", strict=True)
         check_field(self, "table_clearance", 0, "m")
@@ -158,12 +181,14 @@ class SceneConfig:
     @classmethod
     def named(cls, name: str) -> "SceneConfig":
         """``"ideal"``: the floating fixed object of the paper (the default); ``"table"``: the object
-        resting on a table, friction 0.5 on the links and the table, one persistent world (the
+        resting on a table, friction 0.5 on the links and the table, rolling and spinning friction of
+        real materials (1 mm, 0.5 mm), one persistent world (the
         table scene's 5% model mass error is the physics settings', :func:`explore3d.world.scene.scene_explore_config`)."""
         if name == "ideal":
             return cls()
         if name == "table":
-            return cls(table=True, resting=True, friction=0.5, table_friction=0.5, persistent=True)
+            return cls(table=True, resting=True, friction=0.5, table_friction=0.5, rolling_friction_m=1.0e-3,
+                       spinning_friction_m=0.5e-3, persistent=True)
         raise ValueError(f"unknown scene {name!r}; valid: {', '.join(SCENE_NAMES)}")
 
     @property

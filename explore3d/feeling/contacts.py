@@ -38,11 +38,13 @@ __all__ = ["ContactSet", "localise_moment", "localise_attempts", "on_the_arm", "
 MODEL_TORQUE_SIGMA_NM = 2.0e-4
 
 
-def torque_sigma_nm(sensors: SensorConfig) -> float:
+def torque_sigma_nm(sensors: SensorConfig, readings: int = 1) -> float:
     """1-sigma uncertainty of one external joint torque, N m: the current sensor's noise and its
-    quantisation (``resolution / sqrt(12)``), at least :data:`MODEL_TORQUE_SIGMA_NM`."""
+    quantisation (``resolution / sqrt(12)``; the noise dithers it), over ``sqrt(readings)`` for the
+    mean of that many readings, at least :data:`MODEL_TORQUE_SIGMA_NM` (the model's own error,
+    which averaging does not remove)."""
     s = math.hypot(sensors.torque_noise_nm, sensors.torque_resolution_nm / math.sqrt(12.0))
-    return max(s, MODEL_TORQUE_SIGMA_NM)
+    return max(s / math.sqrt(max(1, int(readings))), MODEL_TORQUE_SIGMA_NM)
 
 
 def position_sigma_m(spec: ArmSpec, sensors: SensorConfig) -> float:
@@ -79,6 +81,8 @@ class ContactSet:
             the reading's angles the contact (its point or its profile interval) lies within
             :data:`~explore3d.arm.selfcontact.SELF_CONTACT_TOLERANCE_M` of a body of the arm other than
             its link and the two adjacent to it (:func:`on_the_arm`).  Never used for the hull.
+        sigma_nm: (m,) the torque uncertainty of the contact's reading, N m (:func:`torque_sigma_nm`
+            for the mean of its readings; NaN: not known, the sensing's single reading applies).
     """
 
     points: np.ndarray
@@ -97,6 +101,7 @@ class ContactSet:
     uncertainty_m: np.ndarray = None
     used: np.ndarray = None
     self_contact: np.ndarray = None
+    sigma_nm: np.ndarray = None
 
     def __post_init__(self):
         m = len(self.points)
@@ -108,6 +113,8 @@ class ContactSet:
             object.__setattr__(self, "used", np.zeros(m, dtype=bool))
         if self.self_contact is None:
             object.__setattr__(self, "self_contact", np.zeros(m, dtype=bool))
+        if self.sigma_nm is None:
+            object.__setattr__(self, "sigma_nm", np.full(m, np.nan))
 
     def __len__(self) -> int:
         return len(self.points)
@@ -117,7 +124,7 @@ class ContactSet:
         z = np.zeros(0, dtype=int)
         return cls(np.zeros((0, 3)), np.zeros((0, 2, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0),
                    np.zeros((0, 2)), z, z, z, z, np.zeros(0, dtype="<U16"), np.zeros(0, dtype=bool),
-                   np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool), np.zeros(0, dtype=bool))
+                   np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool), np.zeros(0, dtype=bool), np.zeros(0))
 
     @classmethod
     def concatenate(cls, sets) -> "ContactSet":
@@ -136,7 +143,7 @@ def localise_moment(spec: ArmSpec, moment, T_world_base, gravity, sensors: Senso
     ``T_world_base`` (4, 4), ``gravity`` (3,) m/s^2 (world), with the sensing's uncertainties."""
     r = moment.reading
     tau_ext = external_torques(spec, r.q, r.tau, T_world_base, gravity)
-    return localise(spec, r.q, tau_ext, T_world_base, sigma_nm=torque_sigma_nm(sensors),
+    return localise(spec, r.q, tau_ext, T_world_base, sigma_nm=torque_sigma_nm(sensors, moment.readings),
                     position_sigma_m=position_sigma_m(spec, sensors))
 
 
@@ -182,7 +189,7 @@ def localise_attempts(spec: ArmSpec, attempts, gravity, sensors: SensorConfig, w
                 continue
             on_arm = on_the_arm(spec, m.reading.q, att.T_world_base, loc.contacts)
             for c, s in zip(loc.contacts, on_arm):
-                rows.append((c, ai, m, loc.residual_nm, bool(s)))
+                rows.append((c, ai, m, loc.residual_nm, bool(s), loc.sigma_nm))
     if not rows:
         return ContactSet.empty()
     cs = [r[0] for r in rows]
@@ -201,6 +208,7 @@ def localise_attempts(spec: ArmSpec, attempts, gravity, sensors: SensorConfig, w
         still=np.array([r[2].still for r in rows], bool),
         residual_nm=np.array([r[3] for r in rows], float),
         self_contact=np.array([r[4] for r in rows], bool),
+        sigma_nm=np.array([r[5] for r in rows], float),
     )
 
 
@@ -220,7 +228,7 @@ MAX_UNCERTAINTY_M = 0.5e-3
 MAX_RESIDUAL_SIGMAS = 2.0
 
 
-def contact_uncertainty_m(cs: ContactSet, sigma_nm: float) -> np.ndarray:
+def contact_uncertainty_m(cs: ContactSet, sigma_nm) -> np.ndarray:
     """(m,) position uncertainty of each contact along its link, metres: the largest of
 
     * the reading's resolution ``sigma_nm / force``: a force F moved by d along the link changes
@@ -312,7 +320,7 @@ def contacts_for_hull(cs: ContactSet, config, centre, radius: float, plane=None,
     across the link's height by :func:`resolve_heights` (planar: the mid-height points, the
     plane's section).  The rough ``centre`` (3,) and ``radius`` (m) bound the estimate;
     ``plane`` (n_wraps,) int gives each wrap's plane (None: a plane per wrap)."""
-    sigma = torque_sigma_nm(config.sensors)
+    sigma = np.where(np.isfinite(cs.sigma_nm), cs.sigma_nm, torque_sigma_nm(config.sensors))
     u = contact_uncertainty_m(cs, sigma)
     used = (u <= max_uncertainty_m) & (cs.residual_nm <= MAX_RESIDUAL_SIGMAS * sigma) & cs.still & ~cs.self_contact
     points = cs.points.copy()

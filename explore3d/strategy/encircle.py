@@ -19,6 +19,7 @@ object poses (a test runs a whole exploration with those PyBullet functions remo
 from __future__ import annotations
 
 import collections
+import dataclasses
 import enum
 import math
 from dataclasses import dataclass
@@ -31,6 +32,7 @@ from explore3d.arm.spec import ArmSpec
 from explore3d.arm.workspace import floor_stop
 from explore3d.core.validate import check_field
 from explore3d.feeling.detect import ContactBand, SweepDetector
+from explore3d.feeling.localise import external_torques, localise
 from explore3d.robot.interface import JointCommand, JointReading, Robot
 
 #: A detection is a self-contact when any of the sweep's last this many readings put a carried body
@@ -143,6 +145,21 @@ class ControlConfig:
             at their measured angles (off: they stay referenced straight with the full torque, and
             a distal link bent by the touch is pushed back into the object; measured on the cube
             resting on a table, that settle shoved it 7 mm).
+        press_force_n: contact at a known force (with ``press_while_settling``): once the press
+            has come to rest the contact's force and lever about the swept joint are estimated
+            from the reading (:func:`explore3d.feeling.localise.localise`, the robot's own model),
+            and the swept joint's torque limit is moved, over ``press_ramp_steps``, to what
+            presses the carried links with this force, N (at most
+            :data:`PRESS_ITERATIONS` corrections, each settled); None: the sweep's own torque
+            limit presses (the force then depends on where the touch is: tens of mN at the
+            gentle sweeps' 2 mN m margin).  The force a resting object's friction can hold is
+            the budget (:func:`force_budget_n`).
+        press_ramp_steps: steps over which the torque limit moves to a new press (no step in
+            the contact force: a step change kicks a light object).
+        average_steps: after the moment's settle, hold this many more steps with the same
+            references and limits and report the mean of their readings (angles, velocities,
+            torques) as the moment (:attr:`Moment.readings`; the torque noise of the mean falls
+            as ``1 / sqrt(n)``); 0: the settle's last reading.
     """
 
     speed: float = 3.0
@@ -166,6 +183,9 @@ class ControlConfig:
     self_contact_tolerance: float = SELF_CONTACT_TOLERANCE_M
     self_contact_action: str = "end"
     rereference_distal: bool = False
+    press_force_n: float | None = None
+    press_ramp_steps: int = 24
+    average_steps: int = 0
 
     @classmethod
     def gentle(cls) -> "ControlConfig":
@@ -177,6 +197,36 @@ class ControlConfig:
         (``rereference_distal``)."""
         return cls(tip_speed=0.06, ramp_time=0.2, sweep_torque_margin=0.002, max_sweep_steps=8000,
                    rereference_distal=True)
+
+    @classmethod
+    def within_budget(cls, spec: ArmSpec, force_n: float, lever_m: float | None = None,
+                      base: "ControlConfig | None" = None) -> "ControlConfig":
+        """``base`` (default :meth:`gentle`) with its speed ramp lengthened until every swept joint's
+        torque limit (:func:`sweep_torque_limits`) is at most ``force_n`` N times ``lever_m`` m
+        (default two of ``spec``'s link lengths): a touch that far or farther from the swept joint
+        then presses with at most ``force_n`` (the stalled joint's torque over the lever), nearer
+        touches are on links the next joints sweep with smaller limits.  The ramp sets what a
+        sweep needs to accelerate its distal chain, so the limits fall as it lengthens; the
+        margin (``sweep_torque_margin``) is left as it is.
+
+        Raises:
+            ValueError: the budget is below the margin, which no ramp can meet.
+        """
+        base = cls.gentle() if base is None else base
+        lever = 2.0 * spec.link_length if lever_m is None else float(lever_m)
+        cap = float(force_n) * lever
+        if not (math.isfinite(cap) and cap > base.sweep_torque_margin):
+            raise ValueError(f"ControlConfig.within_budget: force_n x lever_m = {cap:.3g} N m must exceed the sweep's "
+                             f"torque margin {base.sweep_torque_margin:.3g} N m; raise the budget or lower the margin")
+        room = (cap - base.sweep_torque_margin) / base.sweep_torque_factor  # for the acceleration (and gravity)
+        if not base.gravity_compensation:
+            room = room - np.array(spec.gravity_torques())
+        if np.any(room <= 0):
+            raise ValueError(f"ControlConfig.within_budget: {force_n:g} N at {lever:g} m does not hold the arm's own weight "
+                             "without gravity compensation; raise the budget or compensate gravity")
+        accel_per_ramp = np.array(spec.inertia_bounds()) * sweep_speeds(spec, base)  # N m s: need x ramp time
+        ramp = max(base.ramp_time, float(np.max(accel_per_ramp / room)))
+        return dataclasses.replace(base, ramp_time=ramp)
 
     def __post_init__(self):
         check_field(self, "speed", 0, "rad/s", strict=True)
@@ -194,6 +244,13 @@ class ControlConfig:
         check_field(self, "still_steps", 1, integer=True)
         check_field(self, "max_sweep_steps", 1, integer=True)
         check_field(self, "self_contact_tolerance", 0, "m")
+        if self.press_force_n is not None:
+            check_field(self, "press_force_n", 0, "N (or None)", strict=True)
+            if not self.press_while_settling:
+                raise ValueError("ControlConfig.press_force_n needs press_while_settling=True (the press is the "
+                                 "swept joint's settle against the object): set it or drop press_force_n")
+        check_field(self, "press_ramp_steps", 0, integer=True)
+        check_field(self, "average_steps", 0, integer=True)
         if self.self_contact_action not in ("retreat", "end"):
             raise ValueError(f"ControlConfig.self_contact_action must be 'retreat' or 'end'; got {self.self_contact_action!r}")
         for name in ("watch_held", "gravity_compensation", "rereference_held", "press_while_settling",
@@ -292,13 +349,16 @@ class Moment:
         step: the step of the attempt at which it was read (1-based, as ``detect_step``).
         still: the arm was still by :class:`ControlConfig`'s test (False: the settle ran out).
         reading: the :class:`~explore3d.robot.interface.JointReading` at the end of the settle (angles,
-            velocities, motor torques; see :meth:`Controller.settle`).
+            velocities, motor torques; see :meth:`Controller.settle`), or the mean of ``readings``
+            readings held after it (:attr:`ControlConfig.average_steps`).
+        readings: how many readings ``reading`` is the mean of (1: a single reading).
     """
 
     joint: int
     step: int
     still: bool
     reading: JointReading
+    readings: int = 1
 
 
 def sweep_speeds(spec: ArmSpec, cfg: ControlConfig) -> np.ndarray:
@@ -423,6 +483,76 @@ class Controller:
             if i + 1 >= cfg.settle_steps and (run >= cfg.still_steps or cfg.contact_settle_steps == cfg.settle_steps):
                 break
         return run >= cfg.still_steps, self.reading
+
+    def average(self, q_ref, limits, n: int) -> JointReading:
+        """Hold ``q_ref`` with ``limits`` (None: the arm's) for ``n`` steps; the mean of their
+        readings (angles, velocities, torques; the last one's time)."""
+        rs = [self.reading]
+        for _ in range(n):
+            self.send(q_ref, None, limits)
+            rs.append(self.reading)
+        rs = rs[1:]
+        return JointReading(t_s=rs[-1].t_s, q=np.mean([r.q for r in rs], axis=0),
+                            dq=np.mean([r.dq for r in rs], axis=0), tau=np.mean([r.tau for r in rs], axis=0))
+
+
+#: At most this many corrections of the press's torque limit towards :attr:`ControlConfig.press_force_n`.
+PRESS_ITERATIONS = 3
+
+#: A press within this fraction of its target force is not corrected further.
+PRESS_TOLERANCE = 0.15
+
+
+def force_budget_n(least_mass_kg: float, friction: float, margin: float = 0.5, g: float = 9.81) -> float:
+    """The largest contact force, N, a wrap may press a resting object with: ``margin`` (0-1] times
+    the static friction ``friction * least_mass_kg * g`` that holds the lightest object expected
+    (a single horizontal push; the object's own weight is its only load on the table)."""
+    for name, v in (("least_mass_kg", least_mass_kg), ("friction", friction), ("margin", margin)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise ValueError(f"force_budget_n: {name} must be a finite number > 0; got {v!r}")
+    if margin > 1:
+        raise ValueError(f"force_budget_n: margin must be at most 1 (a fraction of the static friction); got {margin!r}")
+    return float(margin * friction * least_mass_kg * g)
+
+
+def carried_force(spec: ArmSpec, reading: JointReading, k: int, T_world_base, gravity) -> tuple[float, float | None]:
+    """The contact force on the links joint ``k`` carries (k and beyond), N, and its mean lever
+    about joint ``k`` (the external torque there over that force), m, from one reading through the
+    arm's own model (:func:`explore3d.feeling.localise.localise`); (0, None) when the torques show
+    no contact."""
+    tau_ext = external_torques(spec, reading.q, reading.tau, T_world_base, gravity)
+    loc = localise(spec, reading.q, tau_ext, T_world_base)
+    f = float(sum(c.force_n for c in loc.contacts if c.link >= k))
+    if f <= 0.0:
+        return 0.0, None
+    return f, abs(float(tau_ext[k])) / f
+
+
+def press_to_force(ctl: "Controller", k: int, q_ref: np.ndarray, limits: np.ndarray, force_n: float
+                   ) -> tuple[bool, JointReading]:
+    """Move the swept joint ``k``'s torque limit (in place in ``limits`` (n,), N m) so the carried
+    links press with ``force_n`` N (:attr:`ControlConfig.press_force_n`): estimate the force and
+    its lever (:func:`carried_force`), ramp the limit by the difference times the lever over
+    ``press_ramp_steps`` steps, settle, repeat (at most :data:`PRESS_ITERATIONS` times, until
+    within :data:`PRESS_TOLERANCE`).  With no force seen the lever is taken as half a link (the
+    nearest a touch on the carried chain can be: the smallest step).  Returns the last settle's
+    stillness and reading."""
+    still, reading = True, ctl.reading
+    for _ in range(PRESS_ITERATIONS):
+        f, lever = carried_force(ctl.spec, reading, k, ctl.T, ctl.robot.gravity)
+        if lever is not None and abs(f - force_n) <= PRESS_TOLERANCE * force_n:
+            break
+        lever = ctl.spec.link_length / 2.0 if lever is None else max(lever, ctl.spec.link_length / 2.0)
+        start = float(limits[k])
+        target = max(0.0, start + (force_n - f) * lever)
+        n_ramp = max(1, ctl.cfg.press_ramp_steps)
+        for i in range(1, n_ramp + 1):
+            limits[k] = start + (target - start) * i / n_ramp
+            ctl.send(q_ref, None, limits)
+        still, reading = ctl.settle(q_ref, limits)
+        if not still:
+            break
+    return still, reading
 
 
 def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: ContactBand | None,
@@ -579,15 +709,21 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
                 q_ref[:k] = q[:k] + cfg.hold_bias * contact[:k]
             if cfg.rereference_distal:  # the carried chain, bent by the touch, does not push back
                 q_ref[k + 1:] = q[k + 1:]
-            still = False
+            still, held = False, None
             if cfg.press_while_settling:  # keep the sweep's reference and torque limit: a gentle push
-                limits = ctl.full.copy()
-                limits[k] = sweep_torques[k]
-                still, reading = ctl.settle(q_ref, limits)
+                held = ctl.full.copy()
+                held[k] = sweep_torques[k]
+                still, reading = ctl.settle(q_ref, held)
+                if still and cfg.press_force_n is not None:  # then press with the chosen force
+                    still, reading = press_to_force(ctl, k, q_ref, held, cfg.press_force_n)
             if not still:  # hold where it stands (after a press that never came to rest: let go)
                 q_ref[k] = ctl.reading.q[k] + cfg.hold_bias
+                held = None
                 still, reading = ctl.settle(q_ref)
-            moments.append(Moment(joint=k, step=ctl.steps, still=still, reading=reading))
+            n_read = 1
+            if still and cfg.average_steps:
+                reading, n_read = ctl.average(q_ref, held, cfg.average_steps), cfg.average_steps
+            moments.append(Moment(joint=k, step=ctl.steps, still=still, reading=reading, readings=n_read))
             q = ctl.reading.q
             if cfg.press_while_settling:  # then hold where it is with the full torque
                 q_ref[k] = q[k] + cfg.hold_bias

@@ -227,6 +227,8 @@ class Exploration:
             else all False).
         redone: (n_wraps,) bool: the wrap repeats the one before it (same pose and settings)
             because that one was flagged in ``moved``.
+        registrations: after :func:`explore3d.strategy.motion.carry_back`, one dict per epoch after a
+            motion (how it was carried back onto the estimate); () otherwise.
     """
 
     spec: ArmSpec
@@ -249,6 +251,7 @@ class Exploration:
     table_z: float | None = None
     moved: np.ndarray | None = None
     redone: np.ndarray | None = None
+    registrations: tuple = ()
 
     @property
     def n_wraps(self) -> int:

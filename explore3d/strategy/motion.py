@@ -17,13 +17,18 @@ measured joint angles).  Metres.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from explore3d.arm.kinematics import link_surface_points
 from explore3d.arm.spec import ArmSpec
 from explore3d.reconstruction.freespace import is_free
+from explore3d.reconstruction.hull_input import reconstruct_points
+from explore3d.reconstruction.registration import register_on_table
 
-__all__ = ["DEFAULT_DEPTH_M", "DEFAULT_MIN_SEGMENTS", "contact_segments", "deep_free", "moved_after"]
+__all__ = ["DEFAULT_DEPTH_M", "DEFAULT_MIN_SEGMENTS", "contact_segments", "deep_free", "moved_after", "wrap_epochs",
+           "carry_back"]
 
 #: a point counts as swept when it lies this far inside swept space in every in-plane direction, m
 #: (the links' 1 mm contact margin, the 1 mm pixels and 0.5 mm margin of the swept areas, and
@@ -89,3 +94,86 @@ def moved_after(segments, swept, w: int, depth_m: float = DEFAULT_DEPTH_M) -> in
     past = [a for s in swept[:w] for a in s]
     came = sum(bool(deep_free(past, s, depth_m).all()) for s in segments[w]) if past else 0
     return int(away + came)
+
+
+#: an epoch's points are carried back only when the epoch before the first motion has at least this
+#: many points to register them to (fewer give no estimate to register against)
+MIN_REFERENCE_POINTS = 30
+#: an epoch whose motion is not observable (:attr:`~explore3d.reconstruction.registration.Registration.observable`)
+#: is kept as it is when its points already lie this close (RMS, m) to the estimate, else dropped
+KEEP_UNREGISTERED_RMS_M = 1.0e-3
+
+
+def wrap_epochs(moved) -> tuple[np.ndarray, np.ndarray]:
+    """(n_wraps,) int: the epoch of each wrap (0 until the first wrap flagged in ``moved``
+    (n_wraps,) bool, then 1, ...), and (n_wraps,) bool: the flagged wraps themselves (the object
+    moved while they ran: their contacts mix two poses)."""
+    moved = np.asarray(moved, dtype=bool)
+    flagged = moved.copy()
+    epoch = np.concatenate([[0], np.cumsum(moved)[:-1]]).astype(int) if len(moved) else np.zeros(0, int)
+    return epoch, flagged
+
+
+def carry_back(ex, centre, radius: float, a: float | None = None):
+    """An :class:`~explore3d.strategy.explore.Exploration` of a resting object that moved
+    (:attr:`~explore3d.strategy.explore.Exploration.moved`), with the points and swept space of every
+    epoch after a motion (:func:`wrap_epochs`) carried back onto the estimate of the ones before:
+    the planar motion (yaw and horizontal slide on the table) that puts an epoch's points on the
+    inverse hull of the points so far (:func:`explore3d.reconstruction.registration.register_on_table`) is
+    undone on its points and swept areas.  The flagged wraps' own points and swept space are
+    dropped.  Returns ``ex`` unchanged without a table, without a flag, or when the first epoch has
+    fewer than :data:`MIN_REFERENCE_POINTS` points; else a copy whose ``registrations`` holds one
+    dict per later epoch (its wraps, points, translation m, yaw deg, RMS before and after m,
+    observable, and what was done: ``"registered"``, ``"kept"`` or ``"dropped"``)."""
+    if ex.table_z is None or ex.moved is None or not np.any(ex.moved):
+        return ex
+    epoch, flagged = wrap_epochs(ex.moved)
+    pw = np.asarray(ex.point_wrap, int)
+    keep_pt = ~flagged[pw]
+    P = np.asarray(ex.points, float).copy()
+    ref = keep_pt & (epoch[pw] == 0)
+    if int(ref.sum()) < MIN_REFERENCE_POINTS:
+        return ex
+    per_wrap = [len(w) for w in ex.attempts]
+    swept = list(ex.swept)
+    carry_swept = sum(per_wrap) == len(swept)
+    sw_wrap = np.repeat(np.arange(ex.n_wraps), per_wrap) if carry_swept else np.zeros(len(swept), int)
+    keep_sw = ~flagged[sw_wrap] if carry_swept else np.ones(len(swept), bool)
+    pool = ref.copy()
+    kw = {} if a is None else {"a": a}
+    out = []
+    for e in range(1, int(epoch.max()) + 1):
+        sel = keep_pt & (epoch[pw] == e)
+        wraps = sorted({int(w) for w in np.nonzero(epoch == e)[0]})
+        rec = {"epoch": e, "wraps": wraps, "points": int(sel.sum())}
+        if sel.sum() < 3:
+            rec["action"] = "dropped"
+            keep_pt &= ~sel
+            out.append(rec)
+            continue
+        est = reconstruct_points(P[pool], pw[pool], centre, radius, **kw).mesh
+        reg = register_on_table(P[sel], est)
+        rec.update(translation_m=[float(v) for v in reg.translation_m], yaw_deg=float(np.degrees(reg.yaw_rad)),
+                   rms_before_m=reg.rms_before_m, rms_m=reg.rms_m, observable=reg.observable)
+        if reg.observable and reg.rms_m <= reg.rms_before_m:
+            T = reg.T
+            P[sel] = P[sel] @ T[:3, :3].T + T[:3, 3]
+            if carry_swept:
+                for i in np.nonzero((epoch[sw_wrap] == e) & keep_sw)[0]:
+                    swept[i] = dataclasses.replace(swept[i], T_world_base=T @ np.asarray(swept[i].T_world_base))
+            rec["action"] = "registered"
+            pool |= sel
+        elif reg.rms_before_m <= KEEP_UNREGISTERED_RMS_M:
+            rec["action"] = "kept"
+            pool |= sel
+        else:
+            rec["action"] = "dropped"
+            keep_pt &= ~sel
+            keep_sw &= ~((epoch[sw_wrap] == e) if carry_swept else np.zeros(len(swept), bool))
+        out.append(rec)
+    if not carry_swept:  # the swept space cannot be told apart by wrap: carve with none of it
+        keep_sw = np.zeros(len(swept), bool)
+    return dataclasses.replace(ex, points=P[keep_pt], point_wrap=pw[keep_pt],
+                               point_attempt=np.asarray(ex.point_attempt)[keep_pt],
+                               point_link=np.asarray(ex.point_link)[keep_pt],
+                               swept=tuple(s for s, k in zip(swept, keep_sw) if k), registrations=tuple(out))

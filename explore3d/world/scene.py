@@ -30,7 +30,7 @@ from explore3d.arm.urdf import load_arm
 from explore3d.core.defaults import SCENE_NAMES  # the named scenes of ``--scene``
 from explore3d.core.settings import SceneConfig, SimConfig
 from explore3d.core.validate import check_field
-from explore3d.strategy.encircle import ControlConfig
+from explore3d.strategy.encircle import ControlConfig, force_budget_n
 from explore3d.strategy.explore import ExploreConfig
 from explore3d.world.parts import _union, convex_parts
 from explore3d.world.sim import ArmSimulation
@@ -149,10 +149,13 @@ def object_pose(world) -> np.ndarray:
     return _pose(world.client, world.object)
 
 
-def scene_explore_config(name: str = "table", **kw):
+def scene_explore_config(name: str = "table", spec=None, **kw):
     """The :class:`~explore3d.strategy.explore.ExploreConfig` of a named scene (``--scene``): ``"ideal"`` is
     ExploreConfig's default; ``"table"`` adds :meth:`SceneConfig.named` ("table"), the gentle
-    sweeps of :meth:`~explore3d.strategy.encircle.ControlConfig.gentle` (unless ``kw`` gives a ``control``),
+    sweeps of :meth:`~explore3d.strategy.encircle.ControlConfig.gentle` with their ramp lengthened to
+    keep within the force budget (:meth:`~explore3d.strategy.encircle.ControlConfig.within_budget`:
+    half the static friction of :attr:`SceneConfig.least_mass_kg` on the table; the arm ``spec``,
+    name or ArmSpec, default the built-in default arm) unless ``kw`` gives a ``control``,
     a 5% model mass error (:attr:`~explore3d.core.settings.SimConfig.mass_error`, seed 0) and PyBullet's
     sequential-impulse solver (on ``kw``'s ``sim`` if given), the paper's link points as the hull's
     input and no probes (unless ``kw`` says otherwise).  Other keyword arguments are
@@ -170,7 +173,9 @@ def scene_explore_config(name: str = "table", **kw):
 
     scene = SceneConfig.named(name)
     if name == "table":
-        kw.setdefault("control", ControlConfig.gentle())
+        if "control" not in kw:
+            budget = force_budget_n(scene.least_mass_kg, scene.table_friction)
+            kw["control"] = ControlConfig.within_budget(load_arm("default") if spec is None else load_arm(spec), budget)
         kw.setdefault("points", "links")
         kw.setdefault("probes", None)
         kw["sim"] = dataclasses.replace(kw.get("sim", SimConfig()), mass_error=0.05, solver="si")

@@ -239,7 +239,12 @@ class ArmSimulation(Workcell):
         col = p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[1.0, 1.0, 0.05])
         body = p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=col,
                                  basePosition=[float(c[0]), float(c[1]), float(scene.table_z) - 0.05])
-        p.changeDynamics(body, -1, lateralFriction=float(scene.config.table_friction), restitution=0.0)
+        # PyBullet combines rolling (spinning) friction as a's rolling times b's lateral friction plus
+        # b's times a's: the object's lateral friction is 1 and its own rolling friction 0, so the
+        # table's value is the pair's.
+        p.changeDynamics(body, -1, lateralFriction=float(scene.config.table_friction), restitution=0.0,
+                         rollingFriction=float(scene.config.rolling_friction_m),
+                         spinningFriction=float(scene.config.spinning_friction_m))
         return body
 
     def step_passive(self) -> None:
