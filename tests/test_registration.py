@@ -114,3 +114,16 @@ def test_carry_back_leaves_an_unmoved_exploration_alone():
     P = _band_points(rng)
     ex = _exploration(P, np.zeros(len(P), int), [False])
     assert carry_back(ex, np.zeros(3), 0.075) is ex
+
+
+def test_carry_back_keeps_an_epoch_when_there_is_no_estimate_to_register_to():
+    """The first epoch's points all on one side of the rough centre: no inverse hull about it;
+    the later points are kept where they were touched (as without carrying back), not lost."""
+    rng = np.random.default_rng(6)
+    first = _band_points(rng, 40, faces=((0, 1),))  # one face only: the centre is outside their hull
+    later = _band_points(rng, 8)
+    pts = np.vstack([first, later])
+    wraps = np.r_[np.zeros(len(first), int), np.full(len(later), 2)]
+    out = carry_back(_exploration(pts, wraps, [False, True, False]), np.zeros(3), 0.075)
+    assert [r["action"] for r in out.registrations] == ["kept"] and "no estimate" in out.registrations[0]["reason"]
+    assert np.array_equal(out.points[out.point_wrap == 2], later)

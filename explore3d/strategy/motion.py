@@ -124,7 +124,8 @@ def carry_back(ex, centre, radius: float, a: float | None = None):
     dropped.  Returns ``ex`` unchanged without a table, without a flag, or when the first epoch has
     fewer than :data:`MIN_REFERENCE_POINTS` points; else a copy whose ``registrations`` holds one
     dict per later epoch (its wraps, points, translation m, yaw deg, RMS before and after m,
-    observable, and what was done: ``"registered"``, ``"kept"`` or ``"dropped"``)."""
+    observable, and what was done: ``"registered"``, ``"kept"`` or ``"dropped"``; an epoch is kept
+    as it is, with a ``reason``, when the points before it give no estimate to register to)."""
     if ex.table_z is None or ex.moved is None or not np.any(ex.moved):
         return ex
     epoch, flagged = wrap_epochs(ex.moved)
@@ -151,7 +152,13 @@ def carry_back(ex, centre, radius: float, a: float | None = None):
             keep_pt &= ~sel
             out.append(rec)
             continue
-        est = reconstruct_points(P[pool], pw[pool], centre, radius, **kw).mesh
+        try:
+            est = reconstruct_points(P[pool], pw[pool], centre, radius, **kw).mesh
+        except ValueError as exc:  # the points so far do not surround the centre: nothing to register to
+            rec.update(action="kept", reason=f"no estimate to register to: {str(exc).split('; ')[0]}")
+            pool |= sel
+            out.append(rec)
+            continue
         reg = register_on_table(P[sel], est)
         rec.update(translation_m=[float(v) for v in reg.translation_m], yaw_deg=float(np.degrees(reg.yaw_rad)),
                    rms_before_m=reg.rms_before_m, rms_m=reg.rms_m, observable=reg.observable)

@@ -38,20 +38,6 @@ from explore3d.world.sim import ArmSimulation
 __all__ = ["SceneConfig", "SceneSetup", "SCENE_NAMES", "convex_parts", "settle_scene", "pose_drift"]
 
 
-
-
-
-
-
-
-
-
-
-
-
-
-
-
 @dataclass(frozen=True)
 class SceneSetup:
     """A settled scene: what the world is built from, and the evaluation's truth.
@@ -255,4 +241,5 @@ class SceneWatch:
         if exploration.moved is not None:
             out["wraps_flagged_moved"] = np.nonzero(exploration.moved)[0].tolist()
             out["wraps_redone"] = np.nonzero(exploration.redone)[0].tolist()
+        out["registrations"] = [dict(r) for r in exploration.registrations]
         return out
