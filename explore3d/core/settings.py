@@ -139,7 +139,10 @@ class SceneConfig:
         register_moved: on a table, the points and swept space gathered after such a motion are
             carried back onto the estimate of those before it (a planar rigid registration,
             :func:`explore3d.strategy.motion.carry_back`) before the hull; the flagged wraps' own are
-            dropped.  False: every point is hulled where it was touched.
+            dropped.  Off by default: it needs contacts on the surface, and the table scene's link
+            points lie 5-15 mm off it (measured on the table cube: registrations that left the
+            RMS at 18 mm; BENCHMARKS.md, "Table scene: force budget").  False: every point is
+            hulled where it was touched.
     """
 
     table: bool = False
@@ -156,7 +159,7 @@ class SceneConfig:
     table_clearance: float = 0.003
     contact_erp: float | None = None
     redo_moved: bool = True
-    register_moved: bool = True
+    register_moved: bool = False
 
     def __post_init__(self):
         for name in ("table", "resting", "persistent", "redo_moved", "register_moved"):
