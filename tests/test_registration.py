@@ -72,9 +72,8 @@ def test_bad_points_are_refused():
 
 
 def test_wrap_epochs():
-    epoch, flagged = wrap_epochs([False, False, True, False, True, False])
-    assert epoch.tolist() == [0, 0, 0, 1, 1, 2]
-    assert flagged.tolist() == [False, False, True, False, True, False]
+    assert wrap_epochs([False, False, True, False, True, False]).tolist() == [0, 0, 0, 1, 1, 2]
+    assert wrap_epochs([]).tolist() == []
 
 
 def _exploration(points, wraps, moved):

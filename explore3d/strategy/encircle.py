@@ -200,7 +200,7 @@ class ControlConfig:
 
     @classmethod
     def within_budget(cls, spec: ArmSpec, force_n: float, lever_m: float | None = None,
-                      base: "ControlConfig | None" = None) -> "ControlConfig":
+                      base: ControlConfig | None = None) -> ControlConfig:
         """``base`` (default :meth:`gentle`) with its speed ramp lengthened until every swept joint's
         torque limit (:func:`sweep_torque_limits`) is at most ``force_n`` N times ``lever_m`` m
         (default two of ``spec``'s link lengths): a touch that far or farther from the swept joint
@@ -487,11 +487,10 @@ class Controller:
     def average(self, q_ref, limits, n: int) -> JointReading:
         """Hold ``q_ref`` with ``limits`` (None: the arm's) for ``n`` steps; the mean of their
         readings (angles, velocities, torques; the last one's time)."""
-        rs = [self.reading]
+        rs = []
         for _ in range(n):
             self.send(q_ref, None, limits)
             rs.append(self.reading)
-        rs = rs[1:]
         return JointReading(t_s=rs[-1].t_s, q=np.mean([r.q for r in rs], axis=0),
                             dq=np.mean([r.dq for r in rs], axis=0), tau=np.mean([r.tau for r in rs], axis=0))
 
@@ -528,7 +527,7 @@ def carried_force(spec: ArmSpec, reading: JointReading, k: int, T_world_base, gr
     return f, abs(float(tau_ext[k])) / f
 
 
-def press_to_force(ctl: "Controller", k: int, q_ref: np.ndarray, limits: np.ndarray, force_n: float
+def press_to_force(ctl: Controller, k: int, q_ref: np.ndarray, limits: np.ndarray, force_n: float
                    ) -> tuple[bool, JointReading]:
     """Move the swept joint ``k``'s torque limit (in place in ``limits`` (n,), N m) so the carried
     links press with ``force_n`` N (:attr:`ControlConfig.press_force_n`): estimate the force and

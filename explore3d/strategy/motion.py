@@ -108,14 +108,12 @@ REGISTERED_RMS_FRACTION = 0.5
 KEEP_UNREGISTERED_RMS_M = 1.0e-3
 
 
-def wrap_epochs(moved) -> tuple[np.ndarray, np.ndarray]:
-    """(n_wraps,) int: the epoch of each wrap (0 until the first wrap flagged in ``moved``
-    (n_wraps,) bool, then 1, ...), and (n_wraps,) bool: the flagged wraps themselves (the object
-    moved while they ran: their contacts mix two poses)."""
+def wrap_epochs(moved) -> np.ndarray:
+    """(n_wraps,) int: the epoch of each wrap: 0 up to and including the first wrap flagged in
+    ``moved`` (n_wraps,) bool, then 1 up to the next, ... (a flagged wrap ends its epoch: the object
+    moved while it ran, so its contacts mix two poses)."""
     moved = np.asarray(moved, dtype=bool)
-    flagged = moved.copy()
-    epoch = np.concatenate([[0], np.cumsum(moved)[:-1]]).astype(int) if len(moved) else np.zeros(0, int)
-    return epoch, flagged
+    return np.concatenate([[0], np.cumsum(moved)[:-1]]).astype(int) if len(moved) else np.zeros(0, int)
 
 
 def carry_back(ex, centre, radius: float, a: float | None = None):
@@ -132,7 +130,8 @@ def carry_back(ex, centre, radius: float, a: float | None = None):
     as it is, with a ``reason``, when the points before it give no estimate to register to)."""
     if ex.table_z is None or ex.moved is None or not np.any(ex.moved):
         return ex
-    epoch, flagged = wrap_epochs(ex.moved)
+    flagged = np.asarray(ex.moved, dtype=bool)
+    epoch = wrap_epochs(flagged)
     pw = np.asarray(ex.point_wrap, int)
     keep_pt = ~flagged[pw]
     P = np.asarray(ex.points, float).copy()
@@ -142,8 +141,9 @@ def carry_back(ex, centre, radius: float, a: float | None = None):
     per_wrap = [len(w) for w in ex.attempts]
     swept = list(ex.swept)
     carry_swept = sum(per_wrap) == len(swept)
+    # without a swept area per attempt the swept space cannot be told apart by wrap: carve with none of it
     sw_wrap = np.repeat(np.arange(ex.n_wraps), per_wrap) if carry_swept else np.zeros(len(swept), int)
-    keep_sw = ~flagged[sw_wrap] if carry_swept else np.ones(len(swept), bool)
+    keep_sw = ~flagged[sw_wrap] if carry_swept else np.zeros(len(swept), bool)
     pool = ref.copy()
     kw = {} if a is None else {"a": a}
     out = []
@@ -169,9 +169,8 @@ def carry_back(ex, centre, radius: float, a: float | None = None):
         if reg.observable and reg.rms_m <= REGISTERED_RMS_FRACTION * reg.rms_before_m:
             T = reg.T
             P[sel] = P[sel] @ T[:3, :3].T + T[:3, 3]
-            if carry_swept:
-                for i in np.nonzero((epoch[sw_wrap] == e) & keep_sw)[0]:
-                    swept[i] = dataclasses.replace(swept[i], T_world_base=T @ np.asarray(swept[i].T_world_base))
+            for i in np.nonzero((epoch[sw_wrap] == e) & keep_sw)[0]:
+                swept[i] = dataclasses.replace(swept[i], T_world_base=T @ np.asarray(swept[i].T_world_base))
             rec["action"] = "registered"
             pool |= sel
         elif reg.rms_before_m <= KEEP_UNREGISTERED_RMS_M:
@@ -180,10 +179,8 @@ def carry_back(ex, centre, radius: float, a: float | None = None):
         else:
             rec["action"] = "dropped"
             keep_pt &= ~sel
-            keep_sw &= ~((epoch[sw_wrap] == e) if carry_swept else np.zeros(len(swept), bool))
+            keep_sw &= epoch[sw_wrap] != e
         out.append(rec)
-    if not carry_swept:  # the swept space cannot be told apart by wrap: carve with none of it
-        keep_sw = np.zeros(len(swept), bool)
     return dataclasses.replace(ex, points=P[keep_pt], point_wrap=pw[keep_pt],
                                point_attempt=np.asarray(ex.point_attempt)[keep_pt],
                                point_link=np.asarray(ex.point_link)[keep_pt],

@@ -338,8 +338,8 @@ def band_cache_key(spec: ArmSpec, control: ControlConfig, sim: SimConfig, sensor
     ctl_d = dataclasses.asdict(control)
     if not control.rereference_distal:  # likewise
         ctl_d.pop("rereference_distal")
-    for name, default in (("press_force_n", None), ("press_ramp_steps", 24), ("average_steps", 0)):
-        if ctl_d[name] == default:  # likewise (fields added after the factory bands were measured)
+    for name in ("press_force_n", "press_ramp_steps", "average_steps"):
+        if ctl_d[name] == ControlConfig.__dataclass_fields__[name].default:  # likewise (added after the factory bands)
             ctl_d.pop(name)
     blob = json.dumps({"protocol": BAND_PROTOCOL_VERSION, "version": __version__, "spec": dataclasses.asdict(spec),
                        "control": ctl_d, "sim": sim_d,

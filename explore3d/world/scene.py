@@ -161,7 +161,7 @@ def scene_explore_config(name: str = "table", spec=None, **kw):
     if name == "table":
         if "control" not in kw:
             budget = force_budget_n(scene.least_mass_kg, scene.table_friction)
-            kw["control"] = ControlConfig.within_budget(load_arm("default") if spec is None else load_arm(spec), budget)
+            kw["control"] = ControlConfig.within_budget(load_arm("default" if spec is None else spec), budget)
         kw.setdefault("points", "links")
         kw.setdefault("probes", None)
         kw["sim"] = dataclasses.replace(kw.get("sim", SimConfig()), mass_error=0.05, solver="si")
