@@ -335,6 +335,8 @@ def band_cache_key(spec: ArmSpec, control: ControlConfig, sim: SimConfig, sensor
     if not sim.mass_error:  # an exact model: the key of the settings before the mass error existed
         sim_d.pop("mass_error")
         sim_d.pop("mass_seed")
+    if sim.global_cfm is None:  # likewise (added after the factory bands)
+        sim_d.pop("global_cfm")
     ctl_d = dataclasses.asdict(control)
     if not control.rereference_distal:  # likewise
         ctl_d.pop("rereference_distal")

@@ -75,6 +75,8 @@ class ArmSimulation(Workcell):
             p.setTimeStep(config.timestep)
             if config.solver == "dantzig":
                 p.setPhysicsEngineParameter(constraintSolverType=pybullet.CONSTRAINT_SOLVER_LCP_DANTZIG)
+            if config.global_cfm is not None:
+                p.setPhysicsEngineParameter(globalCFM=float(config.global_cfm))
         p.setPhysicsEngineParameter(deterministicOverlappingPairs=1)
         fd, path = tempfile.mkstemp(suffix=".urdf", prefix=f"explore3d_{spec.name}_")
         try:
