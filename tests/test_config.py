@@ -62,8 +62,6 @@ def test_geometry_modules_import_neither_the_urdf_nor_the_simulation():
 def test_global_cfm_validated_and_off_by_default():
     """SimConfig.global_cfm: None (PyBullet's 0) by default, so the band keys of the factory
     settings do not change; a negative value is refused naming the field."""
-    from explore3d.core.settings import SimConfig
-
     assert SimConfig().global_cfm is None
     assert SimConfig(global_cfm=1e-6).global_cfm == 1e-6
     with pytest.raises(ValueError, match="SimConfig.global_cfm"):

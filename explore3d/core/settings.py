@@ -73,8 +73,9 @@ class SimConfig:
             falls back to a few sequential-impulse iterations for the whole world, the arm's joint
             motors included.  Measured (``scripts/physics_study.py``): the default arm swinging in
             free space beside a resting 80 mm cube tracked its reference within 313 mrad and read
-            torques of up to 2.1 N m, against 3.9 mrad and 0.09 N m with no object; with 1e-6 the
-            swing is that of the empty world to 1.3e-6 N m.  The table scene sets 1e-6.
+            torques of up to 2.1 N m, against 3.9 mrad and 0.09 N m with no object; with 1e-7, 1e-6 or
+            1e-5 the torques are the empty world's, bit for bit.  No scene sets it yet (the table
+            scene's full runs with it are still to be measured).
     """
 
     timestep: float = 1.0 / 240.0
