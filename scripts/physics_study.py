@@ -76,6 +76,53 @@ def swing(name: str | None, overrides: dict, steps: int, gap: float) -> tuple[np
                  "torque_max_mNm": 1e3 * float(np.abs(tau[60:]).max()), "drift_mm": 1e3 * drift, "wall_s": wall}
 
 
+def creep(name: str, overrides: dict, steps: int, fraction: float, torque_nm: float, scene_set: dict | None = None,
+          warmup: int = 240) -> dict:
+    """Evaluation: the object resting on the table (the arm in the world, straight, 0.25 m away)
+    under a steady horizontal push at its centre of mass of ``fraction`` of its static friction
+    and a steady torque ``torque_nm`` N m about the vertical, for ``steps`` steps: how far it
+    creeps (mm, deg), after ``warmup`` steps untouched (PyBullet's contact manifold between the
+    object and the table starts with one point at the face's centre and gathers its corners over
+    the first steps: a torque at once spins it about that point).  A solver that holds a resting object keeps both near 0."""
+    import dataclasses
+
+    from explore3d.arm.urdf import load_arm
+    from explore3d.core.settings import SceneConfig, SimConfig
+    from explore3d.robot.interface import JointCommand
+    from explore3d.world.objects import load_object
+    from explore3d.world.scene import object_pose, pose_drift, settle_scene
+    from explore3d.world.sim import ArmSimulation
+
+    spec = load_arm("default")
+    sim = dataclasses.replace(SimConfig(mass_error=0.05), **overrides)
+    scene = dataclasses.replace(SceneConfig.named("table"), **(scene_set or {}))
+    mesh = load_object(name)
+    setup = settle_scene(mesh, scene, spec=spec, sim=sim)
+    b = mesh.bounds
+    c = b.mean(axis=0)
+    T = np.eye(4)
+    T[:3, 3] = [c[0] - 0.25 - spec.n_links * spec.link_length, c[1], b[1, 2]]
+    n = spec.n_links
+    lim = np.array(spec.joint_torques())
+    mass = float(setup.mass_kg) if hasattr(setup, "mass_kg") else float(mesh.volume * scene.density)
+    push = fraction * scene.table_friction * mass * 9.81
+    hold = JointCommand(q_ref=np.zeros(n), dq_ref=np.zeros(n), torque_limit=lim, tau_ff=np.zeros(n))
+    with ArmSimulation(spec, config=sim, scene=setup) as world:
+        world._start(T, np.zeros(n))
+        for _ in range(warmup):  # the contact manifold between the object and the table fills up
+            world._step(hold)
+        P0 = object_pose(world)
+        cl, body = world.client, world.object
+        for _ in range(steps):
+            pos = cl.getBasePositionAndOrientation(body)[0]
+            cl.applyExternalForce(body, -1, [push, 0.0, 0.0], pos, cl.WORLD_FRAME)
+            cl.applyExternalTorque(body, -1, [0.0, 0.0, torque_nm], cl.WORLD_FRAME)
+            world._step(hold)
+        d, r = pose_drift(P0, object_pose(world))
+    return {"object": name, **(scene_set or {}), "mass_kg": mass, "push_n": push, "torque_nm": torque_nm, "steps": steps,
+            "creep_mm": 1e3 * d, "creep_deg": float(np.degrees(r))}
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--objects", nargs="+", default=["cube", "cylinder"])
@@ -83,7 +130,21 @@ def main():
     ap.add_argument("--steps", type=int, default=480, help="physics steps of the swing (240 per second)")
     ap.add_argument("--gap", type=float, default=0.011, help="the links' clearance above the top face, m")
     ap.add_argument("--out", required=True, help="JSON lines file (appended)")
+    ap.add_argument("--creep", type=float, nargs=2, metavar=("FRACTION", "TORQUE_NM"),
+                    help="instead of the swing: push the resting object with FRACTION of its static friction "
+                         "and TORQUE_NM N m about the vertical for --steps steps (creep)")
+    ap.add_argument("--scene-set", nargs="*", default=[], metavar="FIELD=VALUE",
+                    help="with --creep: SceneConfig fields changed from the table scene's (numbers)")
     args = ap.parse_args()
+    scene_set = {k: float(v) for k, v in (a.split("=", 1) for a in args.scene_set)}
+    if args.creep:
+        for setting in args.settings:
+            for name in args.objects:
+                row = {"setting": setting, **creep(name, SETTINGS[setting], args.steps, *args.creep, scene_set)}
+                with Path(args.out).open("a") as fh:
+                    fh.write(json.dumps(row) + "\n")
+                print(json.dumps(row), flush=True)
+        return
     for setting in args.settings:
         empty, base = swing(None, SETTINGS[setting], args.steps, args.gap)
         rows = [{"setting": setting, "object": None, **base, "departure_mNm": 0.0}]

@@ -74,8 +74,8 @@ class SimConfig:
             motors included.  Measured (``scripts/physics_study.py``): the default arm swinging in
             free space beside a resting 80 mm cube tracked its reference within 313 mrad and read
             torques of up to 2.1 N m, against 3.9 mrad and 0.09 N m with no object; with 1e-7, 1e-6 or
-            1e-5 the torques are the empty world's, bit for bit.  No scene sets it yet (the table
-            scene's full runs with it are still to be measured).
+            1e-5 the torques are the empty world's, bit for bit.  The table scene sets 1e-6
+            (:func:`~explore3d.world.scene.scene_explore_config`).
     """
 
     timestep: float = 1.0 / 240.0

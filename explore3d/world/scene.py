@@ -143,19 +143,26 @@ def scene_explore_config(name: str = "table", spec=None, **kw):
     half the static friction of :attr:`SceneConfig.least_mass_kg` on the table; the arm ``spec``,
     name or ArmSpec, default the built-in default arm) unless ``kw`` gives a ``control``,
     a 5% model mass error (:attr:`~explore3d.core.settings.SimConfig.mass_error`, seed 0) and PyBullet's
-    sequential-impulse solver (on ``kw``'s ``sim`` if given), the paper's link points as the hull's
+    Dantzig solver with a global constraint-force mixing of 1e-6
+    (:attr:`~explore3d.core.settings.SimConfig.global_cfm`; on ``kw``'s ``sim`` if given), the paper's link points as the hull's
     input and no probes (unless ``kw`` says otherwise).  Other keyword arguments are
     ExploreConfig's.
 
     Why link points: the gentle sweeps press with a few tens of mN, and the localisation's
-    precision is the torque noise over the force (measured on the resting cube: median 15 mm
-    along the link, none of 251 contacts within the hull's 0.5 mm; links 26.6% volume error,
-    localised contacts within 4 mm 52%).  Probes aim at the localised estimate, so none.
+    precision is the torque noise over the force (the profile width about 3 mm at 0.25 N even
+    with averaged readings; ``scripts/table_uncertainty_study.py`` on the resting cube: 2 of 703
+    contacts within the hull's 0.5 mm; the hull of all of them 28.4% volume error, of those within
+    2-5 mm 32-36%, the link points 17.1%).  Probes aim at the localised estimate, so none.
 
-    Why the solver: measured, with the object resting on the table by friction the Dantzig solver
-    (the ideal scene's) no longer held the arm's joints as it does in free space: every joint of a
-    wrap in free space 11 mm above the cube fired a contact (24 of 24; 0 with the table's friction
-    0, 0 with the object moved away, 0 with the sequential-impulse solver and its own band)."""
+    Why the solver (``scripts/physics_study.py``, BENCHMARKS "Table scene: the solver"): with a
+    body resting on the table by friction, PyBullet's Dantzig MLCP, which spans the whole world, is
+    degenerate and falls back to sequential impulses for every constraint, the arm's motors
+    included: a swing in free space 11 mm above the cube lags its reference by up to 313 mrad
+    (3.9 mrad with no object) and every joint fires a false contact.  The sequential-impulse
+    solver lags as much even in an empty world (its motors do not converge), which put the
+    localised contacts a median 13 mm off the surface.  A constraint-force mixing of 1e-7 to 1e-5
+    regularises the MLCP: the arm's torques are bit-identical to the empty world's, and at the
+    force budget the contacts come a median 2-3 mm off the surface, none false."""
 
     scene = SceneConfig.named(name)
     if name == "table":
@@ -164,7 +171,7 @@ def scene_explore_config(name: str = "table", spec=None, **kw):
             kw["control"] = ControlConfig.within_budget(load_arm("default" if spec is None else spec), budget)
         kw.setdefault("points", "links")
         kw.setdefault("probes", None)
-        kw["sim"] = dataclasses.replace(kw.get("sim", SimConfig()), mass_error=0.05, solver="si")
+        kw["sim"] = dataclasses.replace(kw.get("sim", SimConfig()), mass_error=0.05, solver="dantzig", global_cfm=1e-6)
     return ExploreConfig(scene=scene, **kw)
 
 

@@ -1,0 +1,60 @@
+"""The table scene over several placements of the same object (one run is one sample): each
+object turned about the vertical by each of ``--yaws`` degrees before it is put on the table, then
+``scene_explore_config("table")`` as ``explore3d run OBJECT --scene table`` runs it.  The table
+scene's link points do not use the torque readings, so the sensors' noise seed does not vary its
+runs; a placement does (BENCHMARKS.md, "Table scene: the solver").
+
+    python scripts/table_placements.py --objects cube cylinder --yaws 0 10 20 --out /tmp/place.jsonl
+
+Per run: the volume error, IoU, wraps, the object's drift and the false detections (evaluation
+only, :class:`explore3d.world.scene.SceneWatch`) and the wall time of the exploration.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+
+
+def one(name: str, yaw_deg: float) -> dict:
+    import trimesh
+
+    from explore3d.app.pipeline import run
+    from explore3d.world.objects import load_object
+    from explore3d.world.scene import SceneWatch, scene_explore_config, settle_scene
+
+    cfg = scene_explore_config("table")
+    mesh = load_object(name).copy()
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(math.radians(yaw_deg), [0, 0, 1]))
+    setup = settle_scene(mesh, cfg.scene, sim=cfg.sim)
+    watch = SceneWatch(setup)
+    t0 = time.perf_counter()
+    res = run(mesh, "default", cfg, setup=setup, after_wrap=watch.after_wrap)
+    wall = time.perf_counter() - t0
+    s = watch.summary(res.exploration)
+    return {"object": name, "yaw_deg": yaw_deg, "percent_error": round(res.error.percent, 2),
+            "iou": round(res.error.iou, 3), "wraps": res.exploration.n_wraps, "wall_s": round(wall, 1),
+            "drift_mm": round(1e3 * s["drift_m"], 2), "drift_deg": round(s["drift_deg"], 2),
+            "max_drift_mm": round(1e3 * s["max_drift_m"], 2), "false_detections": s["false_detections"],
+            "detections": s["detections_watched"], "flagged": len(s.get("wraps_flagged_moved", []))}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--objects", nargs="+", default=["cube", "cylinder"])
+    ap.add_argument("--yaws", type=float, nargs="+", default=[0.0, 10.0, 20.0], help="degrees")
+    ap.add_argument("--out", required=True, help="JSON lines file (appended)")
+    args = ap.parse_args(argv)
+    for name in args.objects:
+        for yaw in args.yaws:
+            row = one(name, yaw)
+            with Path(args.out).open("a") as fh:
+                fh.write(json.dumps(row) + "\n")
+            print(json.dumps(row), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
