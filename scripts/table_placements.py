@@ -21,7 +21,7 @@ from pathlib import Path
 def one(name: str, yaw_deg: float) -> dict:
     import trimesh
 
-    from explore3d.app.pipeline import run
+    from explore3d.app.pipeline import NoContactError, ReconstructionError, run
     from explore3d.world.objects import load_object
     from explore3d.world.scene import SceneWatch, scene_explore_config, settle_scene
 
@@ -31,7 +31,13 @@ def one(name: str, yaw_deg: float) -> dict:
     setup = settle_scene(mesh, cfg.scene, sim=cfg.sim)
     watch = SceneWatch(setup)
     t0 = time.perf_counter()
-    res = run(mesh, "default", cfg, setup=setup, after_wrap=watch.after_wrap)
+    try:
+        res = run(mesh, "default", cfg, setup=setup, after_wrap=watch.after_wrap)
+    except (NoContactError, ReconstructionError) as exc:  # e.g. the object rolled away: no estimate
+        wall = time.perf_counter() - t0
+        s = watch.summary(exc.exploration) if exc.exploration is not None else {}
+        return {"object": name, "yaw_deg": yaw_deg, "error": str(exc).split(";")[0], "wall_s": round(wall, 1),
+                "max_drift_mm": round(1e3 * s.get("max_drift_m", float("nan")), 2)}
     wall = time.perf_counter() - t0
     s = watch.summary(res.exploration)
     return {"object": name, "yaw_deg": yaw_deg, "percent_error": round(res.error.percent, 2),
