@@ -104,7 +104,7 @@ def creep(name: str, overrides: dict, steps: int, fraction: float, torque_nm: fl
     T[:3, 3] = [c[0] - 0.25 - spec.n_links * spec.link_length, c[1], b[1, 2]]
     n = spec.n_links
     lim = np.array(spec.joint_torques())
-    mass = float(setup.mass_kg) if hasattr(setup, "mass_kg") else float(mesh.volume * scene.density)
+    mass = float(setup.mass_kg)  # the settled scene's, from the object's volume and the density
     push = fraction * scene.table_friction * mass * 9.81
     hold = JointCommand(q_ref=np.zeros(n), dq_ref=np.zeros(n), torque_limit=lim, tau_ff=np.zeros(n))
     with ArmSimulation(spec, config=sim, scene=setup) as world:
