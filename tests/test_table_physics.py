@@ -13,7 +13,8 @@ from explore3d.core.settings import SceneConfig, SimConfig
 from explore3d.robot.interface import JointCommand
 from explore3d.world.objects import box, cube, sphere
 from explore3d.world.scene import object_pose, pose_drift, scene_explore_config, settle_scene
-from explore3d.world.sim import MANIFOLD_STEPS, ArmSimulation, support_resistance
+from explore3d.world.sim import MANIFOLD_STEPS, ArmSimulation
+from explore3d.world.support import support_resistance
 
 ARM = ArmSpec(name="small12", n_links=12, link_length=0.025)
 #: the MLCP's failure beside a resting body shows with the 24-link default arm (with the 12-link
@@ -116,7 +117,7 @@ def _rolled_m(sim: SimConfig, rolling_m: float) -> float:
 
 def test_the_table_solver_keeps_the_stated_rolling_friction_as_bullets_own_solver_does():
     """PyBullet's Dantzig solver drops rolling friction; the world applies it
-    (:func:`~explore3d.world.sim.support_resistance`), and the ball stops where Bullet's
+    (:func:`~explore3d.world.support.support_resistance`), and the ball stops where Bullet's
     sequential-impulse solver (which has it as constraint rows) stops it."""
     sim = scene_explore_config("table").sim
     mu_r = SceneConfig.named("table").rolling_friction_m

@@ -21,7 +21,7 @@ class SimConfig:
         timestep: physics step, s.
         solver: "dantzig" (PyBullet's direct MLCP solver: stiff, held joints stay put; it drops
             rolling and spinning friction, which the world then applies itself:
-            :func:`explore3d.world.sim.support_resistance`) or "si" (the default
+            :mod:`explore3d.world.support`) or "si" (the default
             sequential-impulse solver, soft for long chains).
         position_gain, velocity_gain: PyBullet POSITION_CONTROL motor gains (dimensionless,
             they scale the motor constraint's error reduction).

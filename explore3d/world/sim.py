@@ -13,7 +13,6 @@ Quaternions passed to PyBullet are (x, y, z, w).
 from __future__ import annotations
 
 import functools
-import math
 import os
 import sys
 import tempfile
@@ -57,41 +56,6 @@ def _pose_from_T(T) -> tuple[list, list]:
 #: point at the face's centre nothing but spinning friction resists a turn: the table cube turned
 #: 1 degree in the first wrap, under 0.002 N m it spun 1-19 degrees in 5 s.
 MANIFOLD_STEPS = 120
-
-
-def support_resistance(omega, normal_n, rolling_m, spinning_m, up, inertia_roll, inertia_spin, dt) -> np.ndarray:
-    """The torque (3,), N m, world frame, that rolling and spinning friction put on a body resting
-    on a support: Coulomb-limited, against its angular velocity, never reversing it in one step.
-
-    Bullet's sequential-impulse solver adds these as constraint rows; its MLCP (Dantzig) solver
-    builds its problem from the contact and friction rows only and drops them (measured: a ball
-    set rolling at 0.2 m/s covers the same 0.36 m with ``rollingFriction`` 1e-3 m as with 0).  So
-    a world on that solver applies this torque itself, from the last step's support contacts.
-
-    Args:
-        omega: (3,) the body's angular velocity, rad/s, world frame.
-        normal_n: total normal force of the support's contacts, N (>= 0).
-        rolling_m, spinning_m: the rolling and spinning friction lever arms, m
-            (:attr:`~explore3d.core.settings.SceneConfig.rolling_friction_m` and ``spinning_friction_m``).
-        up: (3,) unit normal of the support (the table's +z).
-        inertia_roll, inertia_spin: moments of inertia, kg m^2, that bound the torque so one step
-            of length ``dt`` (s) at most stops the rolling (about an axis in the support plane) and
-            the spinning (about ``up``) component: the resistance holds a body still but never
-            drives it.
-    """
-    omega = np.asarray(omega, dtype=np.float64)
-    up = np.asarray(up, dtype=np.float64)
-    spin = float(omega @ up)
-    roll = omega - spin * up
-    tau = np.zeros(3)
-    if normal_n <= 0.0:
-        return tau
-    r = float(np.linalg.norm(roll))
-    if r > 0.0 and rolling_m > 0.0:
-        tau -= min(rolling_m * normal_n, inertia_roll * r / dt) * roll / r
-    if spin != 0.0 and spinning_m > 0.0:
-        tau -= math.copysign(min(spinning_m * normal_n, inertia_spin * abs(spin) / dt), spin) * up
-    return tau
 
 
 class ArmSimulation(Workcell):
@@ -183,16 +147,16 @@ class ArmSimulation(Workcell):
         self._motor_array = functools.partial(pybullet.setJointMotorControlArray, physicsClientId=cid)
         self._external_torque = functools.partial(pybullet.applyExternalTorque, physicsClientId=cid)
         #: the stated rolling and spinning friction of a resting object on the table, applied by the
-        #: world on the Dantzig solver (which drops them: :func:`support_resistance`); None otherwise
+        #: world on the Dantzig solver (which drops them: :mod:`explore3d.world.support`); None otherwise
         self._resistance = None
         if scene is not None and scene.parts and self.table is not None and config.solver == "dantzig" and (
                 scene.config.rolling_friction_m > 0 or scene.config.spinning_friction_m > 0):
+            from explore3d.world.support import SupportFriction  # start-up: it loads pybullet
+
             info = p.getDynamicsInfo(self.object, -1)
-            self._resistance = (float(scene.config.rolling_friction_m), float(scene.config.spinning_friction_m),
-                                float(info[0]), float(min(info[2])), float(scene.table_z))
-            self._contacts = functools.partial(pybullet.getContactPoints, physicsClientId=cid)
-            self._base_pose = functools.partial(pybullet.getBasePositionAndOrientation, physicsClientId=cid)
-            self._base_velocity = functools.partial(pybullet.getBaseVelocity, physicsClientId=cid)
+            self._resistance = SupportFriction(cid, self.object, self.table, float(scene.config.rolling_friction_m),
+                                               float(scene.config.spinning_friction_m), float(info[0]),
+                                               float(min(info[2])), float(scene.table_z), config.timestep)
         if scene is not None and scene.parts:  # the arm waits far from the scene until a motion starts
             p.resetBasePositionAndOrientation(self.arm, [50.0, 50.0, 50.0], [0.0, 0.0, 0.0, 1.0])
             for _ in range(MANIFOLD_STEPS):  # the object's support gathers its corners (not counted in steps)
@@ -311,18 +275,7 @@ class ArmSimulation(Workcell):
         """One physics step, with the support's rolling and spinning resistance where the world
         applies it (:attr:`_resistance`)."""
         if self._resistance is not None:
-            rolling, spinning, mass, inertia, table_z = self._resistance
-            normal = sum(c[9] for c in self._contacts(self.object, self.table))  # the last step's
-            if normal > 0.0:
-                pos, _ = self._base_pose(self.object)
-                _, omega = self._base_velocity(self.object)
-                # about a horizontal axis through a support point the moment of inertia is at
-                # least the least principal moment plus mass times the centre's height squared
-                height = max(pos[2] - table_z, 0.0)
-                tau = support_resistance(omega, normal, rolling, spinning, (0.0, 0.0, 1.0),
-                                         inertia + mass * height * height, inertia, self.config.timestep)
-                if tau.any():
-                    self._external_torque(self.object, -1, tau.tolist(), self._world_frame)
+            self._resistance.apply()
         self._step_sim()
 
     def step_passive(self) -> None:
