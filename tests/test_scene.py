@@ -237,3 +237,51 @@ def test_a_light_object_pushed_away_is_noticed_and_a_heavy_one_is_not():
     assert light.moved[i - 1] and np.array_equal(light.poses[i].T_world_base, light.poses[i - 1].T_world_base)
     assert hs["max_drift_m"] < 1e-3 and not heavy.moved.any() and not heavy.redone.any()
     assert len(hs["drift_after_wrap_m"]) == heavy.n_wraps
+
+
+def test_top_search_halves_the_heights_between_the_highest_touch_and_the_lowest_miss():
+    from explore3d.strategy.explore import top_search_height
+
+    assert top_search_height([0.01, 0.03, 0.05], [True, True, False], 0.002) == pytest.approx(0.04)
+    # order does not matter; a miss below the highest touch (a wrap that missed a narrow part) is ignored
+    assert top_search_height([0.05, 0.01, 0.03], [False, False, True], 0.002) == pytest.approx(0.04)
+    assert top_search_height([0.01, 0.03], [False, False], 0.002) is None  # nothing touched
+    assert top_search_height([0.01, 0.03], [True, True], 0.002) is None  # the top is above the range
+    assert top_search_height([0.030, 0.0315], [True, False], 0.002) is None  # found to the tolerance
+    with pytest.raises(ValueError, match="same length"):
+        top_search_height([0.01, 0.03], [True], 0.002)
+
+
+@pytest.mark.parametrize("top", [0.0112, 0.0333, 0.0519])
+def test_top_search_brackets_a_known_top_to_the_tolerance_in_log2_steps(top):
+    """A slab of half-height h touches when its bottom is below the top: the search's interval
+    always holds ``top + h`` and shrinks to the tolerance in ceil(log2(spacing / tol)) wraps."""
+    from explore3d.strategy.explore import top_search_height
+
+    h, tol = 0.005, 0.002
+    heights = list(np.linspace(0.004, 0.064, 5))
+    touched = [z - h < top for z in heights]
+    spacing = heights[1] - heights[0]
+    for _ in range(int(np.ceil(np.log2(spacing / tol)))):
+        z = top_search_height(heights, touched, tol)
+        assert z is not None
+        heights.append(z)
+        touched.append(z - h < top)
+    assert top_search_height(heights, touched, tol) is None
+    lo = max(z for z, t in zip(heights, touched) if t)
+    hi = min(z for z, t in zip(heights, touched) if not t and z > lo)
+    assert lo <= top + h < hi and hi - lo <= tol
+
+
+def test_top_search_wraps_are_horizontal_at_the_height_asked_and_clear_the_table():
+    from explore3d.arm.urdf import load_arm
+    from explore3d.arm.workspace import pose_clears
+    from explore3d.geometry.directions import horizontal_wrap_pose
+
+    spec = load_arm("default")
+    p = horizontal_wrap_pose(np.zeros(3), 0.07, spec.link_width, -0.04, 0.021, 0.3, up=False, label="top search")
+    assert p.T_world_base[2, 3] == pytest.approx(0.021) and p.normal[2] == -1.0
+    assert p.label == "top search z+61mm a17deg cw" and pose_clears(spec, p.T_world_base, -0.04 + 0.002)
+    with pytest.raises(ValueError, match="table_top_tol_m"):
+        from explore3d.strategy.explore import ExploreConfig
+        ExploreConfig(table_top_tol_m=0.0)

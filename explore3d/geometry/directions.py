@@ -146,6 +146,23 @@ def spatial_wrap_poses(centre, radius: float, arm_width: float, n_normals: int =
     return out
 
 
+def horizontal_wrap_pose(centre, radius: float, arm_width: float, table_z: float, z: float, angle: float,
+                         up: bool = True, clearance: float = 0.01, lead: float | None = None,
+                         label: str = "table") -> WrapPose:
+    """The base pose of a horizontal wrap at world height ``z`` (m) around the rough centre (3,)
+    of bounding radius ``radius`` (m), approached from ``angle`` (rad about +z), the curl turning
+    anticlockwise seen from above (``up``: plane normal +z) or clockwise (-z).  The plane's
+    in-plane bound is ``sqrt(radius^2 - s^2)`` (``s`` its height over the centre), at least
+    0.2 ``radius``.  Labelled ``"<label> z+Hmm aAdeg[ cw]"`` with H the height over ``table_z``."""
+    s = float(z - centre[2])
+    r = math.sqrt(max(radius * radius - s * s, (0.2 * radius) ** 2))
+    n = np.array([0.0, 0.0, 1.0 if up else -1.0])
+    R = frame_from_normal(n) @ _rot_z(angle)
+    ld = r if lead is None else lead
+    return wrap_pose(centre, R, s if up else -s, r, arm_width, clearance, ld, n, angle,
+                     f"{label} z{(z - table_z) * 1000:+.0f}mm a{math.degrees(angle):.0f}deg{'' if up else ' cw'}")
+
+
 def table_wrap_poses(centre, radius: float, arm_width: float, table_z: float, lowest_m: float,
                      n_heights: int = 5, n_angles: int = 8, n_normals: int = 48, n_tilted_angles: int = 2,
                      clearance: float = 0.01, lead: float | None = None) -> list[WrapPose]:
@@ -173,17 +190,10 @@ def table_wrap_poses(centre, radius: float, arm_width: float, table_z: float, lo
     heights = np.linspace(z_lo, z_hi, n_heights) if n_heights > 1 else np.array([z_lo])
     out = []
     for h_i, z in enumerate(heights):
-        s = float(z - centre[2])
-        r = math.sqrt(max(R_b * R_b - s * s, (0.2 * R_b) ** 2))
         for a_i in range(n_angles):
-            up = (a_i + h_i) % 2 == 0
-            n = np.array([0.0, 0.0, 1.0 if up else -1.0])
-            angle = 2 * math.pi * (a_i + 0.5 * (h_i % 2)) / n_angles
-            R = frame_from_normal(n) @ _rot_z(angle)
-            ld = r if lead is None else lead
-            out.append(wrap_pose(centre, R, s if up else -s, r, arm_width, clearance, ld, n, angle,
-                                 f"table z{(z - table_z) * 1000:+.0f}mm a{math.degrees(angle):.0f}deg"
-                                 f"{'' if up else ' cw'}"))
+            out.append(horizontal_wrap_pose(centre, R_b, arm_width, table_z, float(z),
+                                            2 * math.pi * (a_i + 0.5 * (h_i % 2)) / n_angles, (a_i + h_i) % 2 == 0,
+                                            clearance, lead))
     for p in spatial_wrap_poses(centre, R_b, arm_width, n_normals, 1, n_tilted_angles, clearance=clearance, lead=lead):
         if abs(p.normal[2]) < math.cos(math.radians(10.0)):
             out.append(p)

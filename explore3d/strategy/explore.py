@@ -31,13 +31,19 @@ from explore3d.core.settings import SceneConfig, SimConfig
 from explore3d.core.validate import check_field
 from explore3d.feeling.contacts import ContactSet, contacts_for_hull, localise_attempts
 from explore3d.feeling.detect import ContactBand
-from explore3d.geometry.directions import WrapPose, planar_wrap_poses, spatial_wrap_poses, table_wrap_poses
+from explore3d.geometry.directions import (
+    WrapPose,
+    horizontal_wrap_pose,
+    planar_wrap_poses,
+    spatial_wrap_poses,
+    table_wrap_poses,
+)
 from explore3d.reconstruction.estimators import single_centre
 from explore3d.reconstruction.freespace import swept_area
 from explore3d.robot.interface import ForwardingRobot, RecordingRobot
 from explore3d.robot.sensing import SensorConfig
 from explore3d.strategy.active import ProbeConfig, finger_poses, probe_poses, unsupported_targets
-from explore3d.strategy.encircle import Attempt, ControlConfig, CurlBack, run_wrap
+from explore3d.strategy.encircle import Attempt, ControlConfig, CurlBack, StopReason, run_wrap
 from explore3d.strategy.motion import DEFAULT_MIN_SEGMENTS, contact_segments, moved_after
 
 log = logging.getLogger(__name__)
@@ -104,6 +110,14 @@ class ExploreConfig:
             moved (:mod:`explore3d.strategy.motion`).
         table_heights, table_angles: the table scene's horizontal wraps: heights and approach
             directions per height (:func:`~explore3d.geometry.directions.table_wrap_poses`).
+        table_top_tol_m, table_top_wraps: the table scene's search for the object's top, m: after
+            the wraps above, horizontal wraps at the height halfway between the highest horizontal
+            wrap that touched the object and the lowest above it that did not, until those two are
+            at most ``table_top_tol_m`` apart or ``table_top_wraps`` wraps are spent
+            (:func:`top_search_height`).  The swept space of the highest wrap that touched nothing
+            bounds the estimate from above: without the search that is the next of
+            ``table_heights``, up to a spacing (19 mm for the default arm and cube) too high.  None:
+            no search.
         curl_back: every wrap's attempts use the curl-back encirclement
             (:class:`~explore3d.strategy.encircle.CurlBack`: after the first contact the chain beyond the
             swept joint's few straight links curls away from the object and unravels as contacts
@@ -134,6 +148,8 @@ class ExploreConfig:
     scene: SceneConfig = field(default_factory=SceneConfig)
     table_heights: int = 5
     table_angles: int = 8
+    table_top_tol_m: float | None = 0.002
+    table_top_wraps: int = 5
 
     def __post_init__(self):
         if self.mode not in ("planar", "3d"):
@@ -153,8 +169,10 @@ class ExploreConfig:
         if self.scene.table and self.curl_back is not None:
             raise ValueError("the curl-back's hairpin moves are not checked against the table: use the straight "
                              "sweep (curl_back=None) in a table scene")
+        if self.table_top_tol_m is not None:
+            check_field(self, "table_top_tol_m", 0, "m", strict=True)
         for name in ("directions", "offsets", "angles", "attempts", "n_along", "n_height", "table_heights",
-                     "table_angles"):
+                     "table_angles", "table_top_wraps"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
@@ -516,6 +534,57 @@ def _probe_rounds(spec, config, centre, radius, poses, results, run_poses, keep=
     return rounds
 
 
+def top_search_height(heights, touched, tol_m: float) -> float | None:
+    """The next height of the search for an object's top, world z, m: halfway between the highest
+    horizontal wrap that touched the object and the lowest above it that did not, or None when
+    they are at most ``tol_m`` apart, when no wrap touched or when the highest one touched (the
+    top is out of the range searched).
+
+    Args:
+        heights: (k,) the horizontal wraps' heights, m; touched: (k,) bool, whether each stopped
+            on a contact with the object.
+    """
+    heights = np.asarray(heights, dtype=float).reshape(-1)
+    touched = np.asarray(touched, dtype=bool).reshape(-1)
+    if heights.shape != touched.shape:
+        raise ValueError(f"heights and touched must have the same length; got {heights.shape} and {touched.shape}")
+    if not touched.any():
+        return None
+    lo = float(heights[touched].max())
+    above = heights[~touched & (heights > lo)]
+    if not len(above):
+        return None
+    hi = float(above.min())
+    return None if hi - lo <= tol_m else 0.5 * (lo + hi)
+
+
+def _touched(attempts) -> bool:
+    """Whether a wrap's attempts stopped a sweep on a contact with the object (not the arm itself)."""
+    return any(r is StopReason.CONTACT for a in attempts for r in a.reasons)
+
+
+def _top_search(spec, config, centre, radius, table_z, poses, results, run_poses, keep) -> int:
+    """The table scene's search for the object's top (:attr:`ExploreConfig.table_top_tol_m`):
+    horizontal wraps placed by :func:`top_search_height` from the robot's own detections.
+    Returns the number of search wraps run."""
+    n = 0
+    while n < config.table_top_wraps:
+        horizontal = [i for i, p in enumerate(poses[:len(results)]) if abs(p.normal[2]) > 1.0 - 1e-9]
+        z = top_search_height([poses[i].T_world_base[2, 3] for i in horizontal],
+                              [_touched(results[i][0]) for i in horizontal], config.table_top_tol_m)
+        if z is None:
+            break
+        angle = 2 * np.pi * (n + 0.25) / config.table_angles  # between the table wraps' approach angles
+        p = horizontal_wrap_pose(centre, radius, spec.link_width, table_z, z, angle, n % 2 == 0,
+                                 config.clearance, label="top search")
+        if not keep(p.T_world_base):
+            break
+        poses.append(p)
+        run_poses([p])
+        n += 1
+    return n
+
+
 def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: ContactBand, centre, radius: float,
                    progress=None, *, table_z: float | None = None, persistent: bool = False, after_wrap=None,
                    band_s: float = 0.0) -> Exploration:
@@ -585,6 +654,9 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
                     redo = True
 
         run_poses(poses)
+        if floor_z is not None and config.table_top_tol_m is not None and config.mode == "3d":
+            _top_search(spec, config, centre, radius, table_z, poses, results, run_poses,
+                        lambda T: pose_clears(spec, T, floor_z))
         if probing:
             rounds = _probe_rounds(spec, config, centre, radius, poses, results, run_poses,
                                    keep=None if floor_z is None else (lambda T: pose_clears(spec, T, floor_z)))
