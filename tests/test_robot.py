@@ -296,6 +296,7 @@ ORACLE_FREE_TABLE = textwrap.dedent("""
     assert ex.config.scene.resting and ex.config.scene.persistent and ex.table_z == setup.table_z
     assert ex.n_contacts > 0 and len(ex.moved) == ex.n_wraps
     assert abs(res.estimate.bounds[0, 2] - setup.table_z) < 1e-9  # the estimate stands on the table
+    assert any(p.label.startswith("top search") for p in ex.poses)  # the search for the top ran too
     print("ORACLE-FREE-TABLE-OK", ex.n_wraps, ex.n_contacts, round(res.error.percent, 2))
 """)
 
