@@ -7,18 +7,22 @@ runs; a placement does (BENCHMARKS.md, "Table scene: the solver").
     python scripts/table_placements.py --objects cube cylinder --yaws 0 10 20 --out /tmp/place.jsonl
 
 Per run: the volume error, IoU, wraps, the object's drift and the false detections (evaluation
-only, :class:`explore3d.world.scene.SceneWatch`) and the wall time of the exploration.
+only, :class:`explore3d.world.scene.SceneWatch`) and the wall time of the exploration; with
+``--detail`` also the wraps the robot flagged as having moved the object, what its registration of
+each later epoch found and did (:func:`explore3d.strategy.motion.carry_back`) and the object's true
+drift after every wrap, to compare them.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import time
 from pathlib import Path
 
 
-def one(name: str, yaw_deg: float) -> dict:
+def one(name: str, yaw_deg: float, detail: bool = False, register: bool = False) -> dict:
     import trimesh
 
     from explore3d.app.pipeline import NoContactError, ReconstructionError, run
@@ -26,6 +30,8 @@ def one(name: str, yaw_deg: float) -> dict:
     from explore3d.world.scene import SceneWatch, scene_explore_config, settle_scene
 
     cfg = scene_explore_config("table")
+    if register:
+        cfg = dataclasses.replace(cfg, scene=dataclasses.replace(cfg.scene, register_moved=True))
     mesh = load_object(name).copy()
     mesh.apply_transform(trimesh.transformations.rotation_matrix(math.radians(yaw_deg), [0, 0, 1]))
     setup = settle_scene(mesh, cfg.scene, sim=cfg.sim)
@@ -40,11 +46,14 @@ def one(name: str, yaw_deg: float) -> dict:
                 "max_drift_mm": round(1e3 * s.get("max_drift_m", float("nan")), 2)}
     wall = time.perf_counter() - t0
     s = watch.summary(res.exploration)
-    return {"object": name, "yaw_deg": yaw_deg, "percent_error": round(res.error.percent, 2),
+    return {"object": name, "yaw_deg": yaw_deg, "register_moved": register, "percent_error": round(res.error.percent, 2),
             "iou": round(res.error.iou, 3), "wraps": res.exploration.n_wraps, "wall_s": round(wall, 1),
             "drift_mm": round(1e3 * s["drift_m"], 2), "drift_deg": round(s["drift_deg"], 2),
             "max_drift_mm": round(1e3 * s["max_drift_m"], 2), "false_detections": s["false_detections"],
-            "detections": s["detections_watched"], "flagged": len(s.get("wraps_flagged_moved", []))}
+            "detections": s["detections_watched"], "flagged": len(s.get("wraps_flagged_moved", []))} | (
+        {"wraps_flagged_moved": s.get("wraps_flagged_moved", []), "registrations": s["registrations"],
+         "drift_after_wrap_mm": [round(1e3 * d, 2) for d in s["drift_after_wrap_m"]],
+         "drift_after_wrap_deg": [round(d, 2) for d in s["drift_after_wrap_deg"]]} if detail else {})
 
 
 def main(argv=None) -> int:
@@ -52,10 +61,14 @@ def main(argv=None) -> int:
     ap.add_argument("--objects", nargs="+", default=["cube", "cylinder"])
     ap.add_argument("--yaws", type=float, nargs="+", default=[0.0, 10.0, 20.0], help="degrees")
     ap.add_argument("--out", required=True, help="JSON lines file (appended)")
+    ap.add_argument("--detail", action="store_true",
+                    help="also the flagged wraps, the robot's registrations (carry_back) and the true drift after each wrap")
+    ap.add_argument("--register", action="store_true",
+                    help="SceneConfig.register_moved=True: carry the points after a flagged wrap back (off by default)")
     args = ap.parse_args(argv)
     for name in args.objects:
         for yaw in args.yaws:
-            row = one(name, yaw)
+            row = one(name, yaw, args.detail, args.register)
             with Path(args.out).open("a") as fh:
                 fh.write(json.dumps(row) + "\n")
             print(json.dumps(row), flush=True)
