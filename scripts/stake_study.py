@@ -28,12 +28,9 @@ def one(name: str, samples: int) -> dict:
     from scipy.spatial import cKDTree
 
     from explore3d.app.pipeline import run
-    from explore3d.world.objects import load_object
-    from nonconvex_set import NONCONVEX_SET
+    from nonconvex_set import load
 
-    spec, size = NONCONVEX_SET[name]
-    mesh = load_object(spec, size=size) if size else load_object(spec)
-    res = run(mesh, "default")
+    res = run(load(name), "default")
     est, truth = res.estimate, res.truth
     C = np.asarray(res.hull.points)
     P, _ = trimesh.sample.sample_surface(est, samples, seed=0)
