@@ -155,7 +155,7 @@ def test_probe_config_rejects_bad_values():
     with pytest.raises(ValueError, match="rounds"):
         ProbeConfig(rounds=-1)
     with pytest.raises(ValueError, match="min_distance_m"):
-        ProbeConfig(min_distance_m=0.0)
+        ProbeConfig(min_distance_m=-0.01)
     with pytest.raises(ValueError, match="fingers"):
         ProbeConfig(fingers=-1)
 

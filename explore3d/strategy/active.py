@@ -1,17 +1,21 @@
-"""Probes chosen from the current estimate (active exploration): where is the estimate least
-supported, and which wraps go there.
+"""Probes chosen from the current estimate (active exploration): where could the estimate still be
+most wrong, and which wraps go there.
 
 After a round of wraps the estimate (a hull of the contacts, carved by the swept free space) has
 surface that no contact supports: facets bridging a concavity the chain spanned like a string,
-and carving's cut faces where a swept slab ended.  :func:`unsupported_targets` samples the
-estimate's surface and picks, farthest first, points farther than ``min_distance_m`` from every
-contact and from the targets already probed; :func:`probe_poses` puts wrap planes through each
-target: planes containing its surface normal (two orientations about it), the arm approaching from
-the side the normal points to, so the chain sweeps down onto the unsupported surface (a facet
-bridging a concavity: one of them runs along the concavity); and a plane across the normal, half a
-link height beneath the surface, whose slab is the next one under it (a face carving left where a
-swept slab ended: the plane sweeps the slab beside it).  Pure functions on numpy arrays; world
-frame, metres.
+and carving's cut faces where a swept slab ended.  A surface point ``d`` from the nearest contact
+may lie up to about ``d`` off the true surface (a surface that turns by at most 45 degrees between
+the contact and the point; the distance bounds the depth, it does not estimate it), so the
+*volume at stake* of a patch is its area times ``d`` (:func:`surface_stake`).
+:func:`unsupported_targets` samples the estimate's surface and picks, highest first, the points
+whose neighbourhood (within the exclusion distance: what one probe's wraps settle) holds the most
+volume at stake, apart from each other and from the targets already probed;
+:func:`probe_poses` puts wrap planes through each target: planes containing its surface normal
+(two orientations about it), the arm approaching from the side the normal points to, so the chain
+sweeps down onto the unsupported surface (a facet bridging a concavity: one of them runs along the
+concavity); and a plane across the normal, half a link height beneath the surface, whose slab is
+the next one under it (a face carving left where a swept slab ended: the plane sweeps the slab
+beside it).  Pure functions on numpy arrays; world frame, metres.
 """
 from __future__ import annotations
 
@@ -25,7 +29,7 @@ from scipy.spatial import cKDTree
 from explore3d.core.validate import check_field
 from explore3d.geometry.directions import WrapPose, fibonacci_sphere, wrap_pose
 
-__all__ = ["ProbeConfig", "unsupported_targets", "probe_poses", "finger_poses"]
+__all__ = ["ProbeConfig", "surface_stake", "unsupported_targets", "probe_poses", "finger_poses"]
 
 
 @dataclass(frozen=True)
@@ -39,9 +43,16 @@ class ProbeConfig:
             (all contain the normal).
         across: one more wrap plane per target, perpendicular to its normal, half a link height
             beneath the surface.
-        min_distance_m: a surface sample of the estimate is unsupported when it lies farther than
-            this from every contact; None: the arm's link length (along a chain hugging a surface
-            every link touches, so contacts lie about a link apart; farther, the estimate bridges).
+        min_distance_m: a surface sample of the estimate closer than this to a contact is never a
+            target.  Default 0: no floor (issue 24: with the former floor of one link length,
+            ``None``, the bunny and the duck got no target although all of their error lay within
+            a link of some contact).
+        rank: how targets are chosen among the samples: ``"stake"`` (default), the most volume at
+            stake (:func:`surface_stake`) within ``exclusion_m`` of the sample; ``"distance"``,
+            the farthest from every contact (the rule before issue 24).
+        stop_stake: stop before a round when the estimate's volume at stake is below this fraction
+            of its volume (0, default: every round runs; the fraction measured after the first
+            wraps is in BENCHMARKS.md).
         exclusion_m: targets lie at least this far from each other and from earlier rounds'
             targets; None: the link height (the thickness of the slab one wrap sweeps).
         min_change: stop when a round changed the estimate's volume by less than this fraction
@@ -63,7 +74,9 @@ class ProbeConfig:
     targets: int = 6
     orientations: int = 2
     across: bool = True
-    min_distance_m: float | None = None
+    min_distance_m: float | None = 0.0
+    rank: str = "stake"
+    stop_stake: float = 0.0
     exclusion_m: float | None = None
     min_change: float = 0.0
     samples: int = 4000
@@ -72,40 +85,70 @@ class ProbeConfig:
     def __post_init__(self):
         for name, lo in (("rounds", 0), ("targets", 1), ("orientations", 1), ("samples", 10)):
             check_field(self, name, lo, integer=True)
-        for name in ("min_distance_m", "exclusion_m"):
-            if getattr(self, name) is not None:
-                check_field(self, name, 0, "m (or None)", strict=True)
+        if self.min_distance_m is not None:
+            check_field(self, "min_distance_m", 0, "m (or None)")
+        if self.exclusion_m is not None:
+            check_field(self, "exclusion_m", 0, "m (or None)", strict=True)
+        if self.rank not in ("stake", "distance"):
+            raise ValueError(f"ProbeConfig.rank must be 'stake' or 'distance'; got {self.rank!r}")
         check_field(self, "min_change", 0)
+        check_field(self, "stop_stake", 0)
         if not isinstance(self.across, bool):
             raise ValueError(f"ProbeConfig.across must be True or False; got {self.across!r}")
         check_field(self, "fingers", 0, integer=True)
 
 
+def surface_stake(mesh, contacts, samples: int = 4000, seed: int = 0):
+    """Where the estimate could still be wrong: seeded surface samples of ``mesh`` (the estimate,
+    closed trimesh, metres) and each one's distance to the nearest of ``contacts`` (m, 3), m.
+
+    A sample ``d`` from every contact may lie up to about ``d`` off the true surface (the surface
+    turning by at most 45 degrees on the way from the contact), so its share of the volume at stake
+    is its area times ``d``; the estimate's volume at stake is ``area_m2 * d.sum()``.
+
+    Returns:
+        points (n, 3), outward unit normals (n, 3), distances d (n,) m (inf with no contact), and
+        the area each sample stands for, m^2 (the estimate's area over ``samples``).
+    """
+    P, fi = trimesh.sample.sample_surface(mesh, samples, seed=seed)
+    C = np.asarray(contacts, dtype=float).reshape(-1, 3)
+    d = cKDTree(C).query(P)[0] if len(C) else np.full(len(P), np.inf)
+    return P, mesh.face_normals[fi], d, float(mesh.area) / len(P)
+
+
 def unsupported_targets(mesh, contacts, min_distance_m: float, exclusion_m: float, k: int, previous=None,
-                        samples: int = 4000, seed: int = 0):
+                        samples: int = 4000, seed: int = 0, rank: str = "distance"):
     """Up to ``k`` points of the estimate's surface least supported by contacts.
 
     Args:
         mesh: the estimate (closed trimesh, metres).
         contacts: (m, 3) contact points, m.
-        min_distance_m: samples closer than this to a contact are supported.
-        exclusion_m: targets keep at least this distance from each other and from ``previous``.
+        min_distance_m: samples this close to a contact, or closer, are never targets.
+        exclusion_m: targets keep more than this distance from each other and from ``previous``.
         previous: (p, 3) earlier targets, m (or None).
+        rank: ``"distance"``: farthest from every contact first; ``"stake"``: the most volume at
+            stake (:func:`surface_stake`, area x distance, m^3) within ``exclusion_m`` of the
+            sample first (a wide bridged patch before a lone far point).
 
     Returns:
         points (t, 3), outward unit normals (t, 3), and each one's distance to the nearest
-        contact (t,), m; farthest first.
+        contact (t,), m; in the order of ``rank``.
     """
-
-    P, fi = trimesh.sample.sample_surface(mesh, samples, seed=seed)
-    N = mesh.face_normals[fi]
-    C = np.asarray(contacts, dtype=float).reshape(-1, 3)
-    d = cKDTree(C).query(P)[0] if len(C) else np.full(len(P), np.inf)
+    if rank not in ("stake", "distance"):
+        raise ValueError(f"rank must be 'stake' or 'distance'; got {rank!r}")
+    P, N, d, area = surface_stake(mesh, contacts, samples, seed)
     ok = d > min_distance_m
     if previous is not None and len(previous):
         ok &= cKDTree(np.asarray(previous, float).reshape(-1, 3)).query(P)[0] > exclusion_m
+    if rank == "stake" and np.isfinite(d).all():
+        pairs = cKDTree(P).query_pairs(exclusion_m, output_type="ndarray")
+        key = area * d.copy()
+        np.add.at(key, pairs[:, 0], area * d[pairs[:, 1]])
+        np.add.at(key, pairs[:, 1], area * d[pairs[:, 0]])
+    else:
+        key = d
     idx = np.nonzero(ok)[0]
-    idx = idx[np.lexsort((idx, -d[idx]))]  # farthest first, ties by index (deterministic)
+    idx = idx[np.lexsort((idx, -key[idx]))]  # highest first, ties by index (deterministic)
     chosen: list[int] = []
     for i in idx:
         if len(chosen) >= k:

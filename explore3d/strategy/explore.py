@@ -42,7 +42,7 @@ from explore3d.reconstruction.estimators import single_centre
 from explore3d.reconstruction.freespace import swept_area
 from explore3d.robot.interface import ForwardingRobot, RecordingRobot
 from explore3d.robot.sensing import SensorConfig
-from explore3d.strategy.active import ProbeConfig, finger_poses, probe_poses, unsupported_targets
+from explore3d.strategy.active import ProbeConfig, finger_poses, probe_poses, surface_stake, unsupported_targets
 from explore3d.strategy.encircle import Attempt, ControlConfig, CurlBack, StopReason, run_wrap
 from explore3d.strategy.motion import DEFAULT_MIN_SEGMENTS, contact_segments, moved_after
 
@@ -238,7 +238,8 @@ class Exploration:
             per attempt (empty unless ``config.free_space``).
         probe_rounds: one dict per round of probes (``config.probes``): its ``targets`` (t, 3) m,
             their ``distance_m`` to the nearest contact before the round, ``wraps`` added, the
-            estimate's ``volume_m3`` before the round and ``wall_s``.
+            estimate's ``volume_m3`` and volume at stake ``stake_m3``
+            (:func:`~explore3d.strategy.active.surface_stake`) before the round, and ``wall_s``.
         table_z: the table top's height the robot was told, world z, m (None: no table).
         moved: (n_wraps,) bool: after the wrap the object seemed to have moved, by the robot's own
             contacts and swept space (:func:`explore3d.strategy.motion.moved_after`; persistent worlds only,
@@ -497,8 +498,9 @@ def current_estimate(spec, config, centre, radius, poses, results):
 
 
 def _probe_rounds(spec, config, centre, radius, poses, results, run_poses, keep=None) -> list[dict]:
-    """Rounds of probes (:mod:`explore3d.strategy.active`): wraps through the estimate's least supported
-    surface until a round changes its volume by less than ``min_change`` or none is left."""
+    """Rounds of probes (:mod:`explore3d.strategy.active`): wraps through the surface where the estimate
+    could still be most wrong, until its volume at stake falls below ``stop_stake`` of its volume, a
+    round changes its volume by less than ``min_change``, no target is left or the rounds are spent."""
     pc = config.probes
     d_min = spec.link_length if pc.min_distance_m is None else pc.min_distance_m
     excl = spec.link_height if pc.exclusion_m is None else pc.exclusion_m
@@ -515,13 +517,20 @@ def _probe_rounds(spec, config, centre, radius, poses, results, run_poses, keep=
         if volume is not None and pc.min_change > 0 and abs(v - volume) < pc.min_change * volume:
             break
         volume = v
-        targets, normals, dist = unsupported_targets(est, pts, d_min, excl, pc.targets, previous, pc.samples, seed=k)
+        _, _, d, area = surface_stake(est, pts, pc.samples, seed=k)
+        stake = float(area * d.sum())
+        if stake < pc.stop_stake * v:
+            log.info("probes: volume at stake %.3g of the estimate, below %.3g: done", stake / v, pc.stop_stake)
+            break
+        targets, normals, dist = unsupported_targets(est, pts, d_min, excl, pc.targets, previous, pc.samples,
+                                                     seed=k, rank=pc.rank)
         if not len(targets):
             break
         new = probe_poses(targets, normals, centre, radius, spec.link_width, pc.orientations, config.clearance,
                           label=f"probe r{k}", across_depth_m=spec.link_height / 2 if pc.across else None)
         if pc.fingers:
-            ft, fn, _ = unsupported_targets(est, pts, d_min, excl, pc.fingers, previous_fingers, pc.samples, seed=k)
+            ft, fn, _ = unsupported_targets(est, pts, d_min, excl, pc.fingers, previous_fingers, pc.samples,
+                                            seed=k, rank=pc.rank)
             new += finger_poses(ft, fn, est, centre, radius, spec, label=f"finger r{k}")
             previous_fingers = np.vstack([previous_fingers, ft])
         if keep is not None:  # a table: only the probes whose start clears it
@@ -530,7 +539,7 @@ def _probe_rounds(spec, config, centre, radius, poses, results, run_poses, keep=
         run_poses(new)
         previous = np.vstack([previous, targets])
         rounds.append({"targets": targets, "distance_m": dist, "wraps": len(new), "volume_m3": v,
-                       "wall_s": time.perf_counter() - t0})
+                       "stake_m3": stake, "wall_s": time.perf_counter() - t0})
     return rounds
 
 
