@@ -128,6 +128,7 @@ CASES = [
     (["run", "cube", "--out", "@o", "--points", "stars"], 2, "stars"),
     (["run", "cube", "--out", "@o", "--probes", "-1"], 2, "probes"),
     (["run", "cube", "--out", "@o", "--fingers", "x"], 2, "fingers"),
+    (["run", "cube", "--out", "@o", "--probe-rank", "far"], 2, "probe_rank"),
     (["run", "cube", "--out", "@o", "--encircle", "spiral"], 2, "spiral"),
     (["run", "cube", "--out", "@o", "--density", "0"], 2, "density"),
     (["run", "cube", "--out", "@o", "--height", "-1"], 2, "height"),

@@ -1,4 +1,5 @@
 """Coverage of non-convex objects: free space and probes reach into what the straight sweeps bridge."""
+import numpy as np
 import trimesh
 
 from explore3d.strategy.active import ProbeConfig
@@ -25,3 +26,21 @@ def test_probes_and_free_space_empty_most_of_the_u_channels_slot():
     assert fill(res.hull.mesh) > 0.9  # the hull alone bridges the slot
     assert len(res.exploration.probe_rounds) == 3 and res.carved.carved_m3 > 0
     assert fill(res.estimate) < 0.45, fill(res.estimate)
+
+
+def test_a_bunny_run_gets_probe_targets_and_reports_its_volume_at_stake():
+    """A short bunny run (8 wraps): its first round of probes has targets, their wraps ran, and the
+    round reports the estimate's volume at stake (positive; every target within the rough bound's
+    diameter of a contact); a stop_stake above that fraction of the volume runs no round."""
+    from explore3d.world.objects import load_object
+
+    bunny = load_object("pybullet_data:bunny.obj", size=0.1)
+    pc = ProbeConfig(rounds=1, targets=2, orientations=1, across=False, fingers=0)
+    res = run(bunny, "default", ExploreConfig(directions=4, angles=2, jobs=2, probes=pc))
+    (r,) = res.exploration.probe_rounds
+    assert len(r["targets"]) == 2 and r["wraps"] == 2 and res.exploration.n_wraps == 10
+    frac = r["stake_m3"] / r["volume_m3"]
+    assert frac > 0 and np.all((r["distance_m"] > 0) & (r["distance_m"] < 2 * res.radius))
+    stop = ProbeConfig(rounds=1, targets=2, orientations=1, across=False, fingers=0, stop_stake=1.01 * frac)
+    res2 = run(bunny, "default", ExploreConfig(directions=4, angles=2, jobs=2, probes=stop))
+    assert res2.exploration.probe_rounds == () and res2.exploration.n_wraps == 8

@@ -120,6 +120,45 @@ def test_unsupported_targets_and_their_planes():
         assert abs(abs(n @ z) - 1) < 1e-9 and abs((p - 0.005 * n - o) @ z) < 1e-9  # across, 5 mm beneath
 
 
+def test_volume_at_stake_of_a_square_with_one_contact_at_its_centre():
+    """Known answer: the mean distance from the centre of a square of side L to its points is
+    L (sqrt(2) + ln(1 + sqrt(2))) / 6, so the volume at stake is L^2 times that."""
+    from explore3d.strategy.active import surface_stake
+
+    L = 0.1
+    sq = trimesh.Trimesh([[0, 0, 0], [L, 0, 0], [L, L, 0], [0, L, 0]], [[0, 1, 2], [0, 2, 3]], process=False)
+    P, N, d, area = surface_stake(sq, [[L / 2, L / 2, 0.0]], samples=40000, seed=3)
+    expected = L ** 3 * (np.sqrt(2) + np.log(1 + np.sqrt(2))) / 6
+    assert area == pytest.approx(L * L / 40000) and np.allclose(np.abs(N[:, 2]), 1.0)
+    assert area * d.sum() == pytest.approx(expected, rel=0.01)
+    # the same square moved and turned: the same stake (rigid motion)
+    T = trimesh.transformations.random_rotation_matrix(np.random.default_rng(1).random(3))
+    T[:3, 3] = [0.3, -0.2, 0.5]
+    sq2 = sq.copy().apply_transform(T)
+    c2 = trimesh.transform_points([[L / 2, L / 2, 0.0]], T)
+    _, _, d2, a2 = surface_stake(sq2, c2, samples=40000, seed=3)
+    assert a2 * d2.sum() == pytest.approx(area * d.sum(), rel=1e-6)
+
+
+def test_stake_targets_need_no_link_length_floor_and_prefer_the_widest_gap():
+    """The bunny as the estimate, touched everywhere to within 20 mm (the former floor) except two
+    patches left bare: the former rule (farther than a link length) finds nothing to aim at; the
+    volume at stake finds targets, the first in the wider patch."""
+    from explore3d.world.objects import load_object
+
+    bunny = load_object("pybullet_data:bunny.obj", size=0.1)
+    S = trimesh.sample.sample_surface_even(bunny, 3000, seed=0)[0]
+    wide, narrow = S[np.argmin(S[:, 0])], S[np.argmax(S[:, 0])]
+    keep = (np.linalg.norm(S - wide, axis=1) > 0.016) & (np.linalg.norm(S - narrow, axis=1) > 0.01)
+    C = S[keep]
+    assert len(unsupported_targets(bunny, C, 0.02, 0.01, 5)[0]) == 0  # the former default: no target
+    P, N, d = unsupported_targets(bunny, C, 0.0, 0.01, 3, rank="stake")
+    assert len(P) == 3 and np.all(d > 0)
+    assert np.linalg.norm(P[0] - wide) < 0.016
+    with pytest.raises(ValueError, match="rank"):
+        unsupported_targets(bunny, C, 0.0, 0.01, 1, rank="volume")
+
+
 def test_finger_lies_alongside_the_slot_wall_in_empty_space_and_curls_onto_it():
     """The U-channel as the estimate, a target on a slot wall: the finger's straight arm (link
     cross-section plus the gap) lies outside the estimate, its base outside the rough bound, the
@@ -158,6 +197,10 @@ def test_probe_config_rejects_bad_values():
         ProbeConfig(min_distance_m=-0.01)
     with pytest.raises(ValueError, match="fingers"):
         ProbeConfig(fingers=-1)
+    with pytest.raises(ValueError, match="rank"):
+        ProbeConfig(rank="farthest")
+    with pytest.raises(ValueError, match="stop_stake"):
+        ProbeConfig(stop_stake=-0.1)
 
 
 def test_the_swept_space_of_a_real_exploration_never_holds_the_object():

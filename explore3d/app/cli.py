@@ -152,6 +152,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--fingers", type=RUN_OPTIONS["fingers"], metavar="N",
                    help="3d: finger probes per round of probes: the straight arm laid alongside unsupported "
                         "surface through space the estimate leaves empty, then swept onto it (default 12; 0: none)")
+    r.add_argument("--probe-rank", dest="probe_rank", type=RUN_OPTIONS["probe_rank"],
+                   help="3d: how probe targets are chosen: stake (default: the most volume the estimate could still "
+                        "have wrong, area x distance to the nearest contact) or distance (the farthest from every "
+                        "contact beyond a link length, the rule before issue 24)")
     r.add_argument("--scene", type=RUN_OPTIONS["scene"],
                    help="ideal (default: the object fixed, floating, frictionless, exact model, world reset per wrap) "
                         "or table (resting on a table with weight and friction 0.5, 5%% model mass error, one "

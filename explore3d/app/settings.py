@@ -176,6 +176,9 @@ RUN_OPTIONS = {
     "probes": _int_min("--probes", 0),
     # finger probes per round: the straight arm laid alongside unsupported surface in carved space
     "fingers": _int_min("--fingers", 0),
+    # how probe targets are ranked: the most volume at stake (area x distance to a contact) or the farthest
+    # from every contact beyond a link length (the rule before issue 24)
+    "probe_rank": _choice("probe_rank", ("stake", "distance")),
     # how each attempt encircles: the paper's straight sweep or its proposed curl-back
     "encircle": _choice("encircle", ("straight", "curl-back")),
     # the world: the paper's idealised one, or the object resting on a table (explore3d.world.scene)
@@ -271,8 +274,10 @@ def explore_config(opts: dict):
             kw["sensors"] = dataclasses.replace(kw.get("sensors", SensorConfig()), seed=opts["noise_seed"])
         if opts.get("collision_margin") is not None:
             kw["sim"] = SimConfig(collision_margin=opts["collision_margin"])
-        if opts.get("probes") is not None or opts.get("fingers") is not None:
+        if opts.get("probes") is not None or opts.get("fingers") is not None or opts.get("probe_rank") is not None:
             probes = ProbeConfig() if opts.get("probes") is None else ProbeConfig(rounds=opts["probes"])
+            if opts.get("probe_rank") == "distance":  # the former rule whole: its one-link floor too
+                probes = dataclasses.replace(probes, rank="distance", min_distance_m=None)
             if opts.get("fingers") is not None:
                 if not probes.rounds and opts["fingers"]:
                     raise ValueError("--fingers places finger probes in the rounds of probes: give --probes >= 1 "
@@ -291,4 +296,4 @@ def explore_config(opts: dict):
 #: Settings a sweep's grid may sweep (explore3d.app.sweep), each an option of ``explore3d run`` (see ``explore3d run --help``).
 SWEEP_KEYS = ("a", "angles", "arm", "attempts", "base_step", "clearance", "collision_margin", "directions",
               "encircle", "face_offset", "fingers", "method", "mirrored", "mode", "n_along", "n_height", "noise_seed", "offsets",
-              "points", "probes", "scene", "seed", "sensing", "size")
+              "points", "probe_rank", "probes", "scene", "seed", "sensing", "size")
