@@ -15,7 +15,11 @@ selects them), their inverse hull carved by those wraps' swept space, scored aga
 (volume error %, split into the estimate's excess outside the truth and the truth it misses, both
 in % of the true volume; coverage of the true surface within 3 mm by the hulled contacts) with the wall
 time at which the k-th wrap ended.  One JSON line per object is appended to ``--out`` (objects
-already in it under the same label are skipped).
+already in it under the same label are skipped).  ``--table`` prints the file's runs as a Markdown
+table instead: per object and label, error % / coverage within 3 mm % / wraps / seconds at the end
+of the straight sweeps and of each round.
+
+    python scripts/anytime.py --table --out DIR/anytime.jsonl
 """
 from __future__ import annotations
 
@@ -109,12 +113,29 @@ def one(name: str, label: str, probe: dict, no_probes: bool, every: int, jobs: i
             "rounds": rounds, "curve": curve}
 
 
+def table(path: Path) -> str:
+    """The runs of the JSON-lines file ``path`` as a Markdown table (see the module's docstring)."""
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    width = max(sum(c["round_end"] for c in r["curve"]) for r in rows)
+    head = ["object", "label", "sweeps"] + [f"round {i}" for i in range(1, width)] + ["excess / missing at the end"]
+    out = ["| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
+    for r in sorted(rows, key=lambda r: (r["object"], r["label"])):
+        ends = [c for c in r["curve"] if c["round_end"]]
+        cells = [f"{c['percent_error']:.2f} / {100 * c['coverage_3mm']:.0f} / {c['wraps']} / {c['wall_s']:.0f}"
+                 for c in ends] + ["-"] * (width - len(ends))
+        last = r["curve"][-1]
+        split = f"{last['excess_percent']:.2f} / {last['missing_percent']:.2f}" if "excess_percent" in last else "-"
+        out.append("| " + " | ".join([r["object"], r["label"], *cells, split]) + " |")
+    return "\n".join(out)
+
+
 def main(argv=None) -> int:
     from nonconvex_set import NONCONVEX_SET
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--objects", nargs="+", default=["nonconvex"])
-    ap.add_argument("--label", required=True, help="name of the setting measured")
+    ap.add_argument("--label", help="name of the setting measured (required unless --table)")
+    ap.add_argument("--table", action="store_true", help="print --out's runs as a Markdown table and stop")
     ap.add_argument("--probe", action="append", default=[], metavar="KEY=VALUE",
                     help="a ProbeConfig field (repeatable), e.g. min_distance_m=0.02")
     ap.add_argument("--no-probes", action="store_true", help="the straight sweeps only")
@@ -122,6 +143,11 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, required=True, help="JSON-lines file (appended)")
     args = ap.parse_args(argv)
+    if args.table:
+        print(table(args.out))
+        return 0
+    if not args.label:
+        ap.error("--label is required (the name of the setting measured)")
     groups = GROUPS | {"nonconvex": tuple(NONCONVEX_SET)}
     names = [n for o in args.objects for n in groups.get(o, (o,))]
     probe = {}
