@@ -451,6 +451,9 @@ def test_cli_and_api_give_the_same_estimate(tmp_path, capsys, small_arm, mode):
         assert report[key] == value, key
     np.testing.assert_array_equal(report["config"]["centre_m"], res.centre)
     assert report["config"]["radius_m"] == res.radius
+    assert [(r["wraps"], r["stake_m3"]) for r in report["probe_rounds"]] == \
+        [(r["wraps"], r["stake_m3"]) for r in res.exploration.probe_rounds]
+    assert len(report["probe_rounds"]) == (1 if mode == "3d" else 0)
     if mode == "planar":
         ring = np.array(json.loads((out / "estimate_polygon.json").read_text()))
         np.testing.assert_array_equal(ring, np.asarray(res.estimate.exterior.coords)[:-1])

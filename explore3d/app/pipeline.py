@@ -106,9 +106,16 @@ class Result:
 
 
 def exploration_summary(ex: Exploration) -> dict:
-    """``n_wraps``, ``n_points``, ``n_contacts``, ``wall_s``, ``sim_s`` and ``steps`` of an exploration."""
+    """``n_wraps``, ``n_points``, ``n_contacts``, ``wall_s``, ``sim_s`` and ``steps`` of an exploration,
+    and ``probe_rounds``: per round of probes its ``targets`` (how many), ``wraps`` added, the
+    estimate's ``volume_m3`` and volume at stake ``stake_m3`` before it, their ratio
+    ``stake_fraction`` and ``wall_s``."""
+    rounds = [{"targets": int(len(r["targets"])), "wraps": int(r["wraps"]), "volume_m3": float(r["volume_m3"]),
+               "stake_m3": float(r["stake_m3"]), "stake_fraction": float(r["stake_m3"] / r["volume_m3"]),
+               "wall_s": float(r["wall_s"])} for r in ex.probe_rounds]
     return {"n_wraps": ex.n_wraps, "n_points": int(len(ex.points)), "n_contacts": ex.n_contacts,
-            "wall_s": float(ex.wall_s), "sim_s": float(ex.sim_time_s), "steps": int(ex.steps)}
+            "wall_s": float(ex.wall_s), "sim_s": float(ex.sim_time_s), "steps": int(ex.steps),
+            "probe_rounds": rounds}
 
 
 def table_contacts(ex: Exploration) -> int:
