@@ -6,7 +6,7 @@ EVALUATION ONLY: the truth is read after the run.
     python scripts/anytime.py --objects bunny --label floor20 --probe min_distance_m=0.02 --out DIR/anytime.jsonl
 
 Per object (a built-in name, a name of the fixed non-convex set, or the groups ``nonconvex`` and
-``concave``) one default 3D run (ideal scene, the README's arm and sensing; ``--probe KEY=VALUE``
+``concave``) one default 3D run (ideal scene, the README's sensing, the default arm or ``--arm``; ``--probe KEY=VALUE``
 overrides a :class:`~explore3d.strategy.active.ProbeConfig` field, ``--no-probes`` turns probes
 off), then the estimate the robot would have had after the first ``k`` wraps, for every ``k`` that
 ends a round (the straight sweeps, each round of probes) and every ``--every`` wraps: the hulled
@@ -73,7 +73,7 @@ def prefix_score(ex, truth, centre, radius, k: int, seed: int = 0) -> dict:
             "hulled_contacts": int(len(used.points))}
 
 
-def one(name: str, label: str, probe: dict, no_probes: bool, every: int, jobs: int) -> dict:
+def one(name: str, label: str, probe: dict, no_probes: bool, every: int, jobs: int, arm: str = "default") -> dict:
     from explore3d import load_object
     from explore3d.app.pipeline import run
     from explore3d.strategy.active import ProbeConfig
@@ -90,7 +90,7 @@ def one(name: str, label: str, probe: dict, no_probes: bool, every: int, jobs: i
         while len(ends) < done:
             ends.append(time.perf_counter() - t0)
 
-    res = run(mesh, "default", config, progress=progress)
+    res = run(mesh, arm, config, progress=progress)
     ex = res.exploration
     n = ex.n_wraps
     bounds, k = [], n - sum(r["wraps"] for r in ex.probe_rounds)
@@ -108,7 +108,7 @@ def one(name: str, label: str, probe: dict, no_probes: bool, every: int, jobs: i
     rounds = [{key: (v.tolist() if hasattr(v, "tolist") else v) for key, v in r.items()
                if key not in ("targets", "distance_m")} | {"targets": int(len(r["targets"]))}
               for r in ex.probe_rounds]
-    return {"object": name, "label": label, "probe": probe, "no_probes": no_probes,
+    return {"object": name, "label": label, "arm": arm, "probe": probe, "no_probes": no_probes,
             "percent_error": round(res.error.percent, 3), "wraps": n, "explore_s": round(ex.wall_s, 1),
             "rounds": rounds, "curve": curve}
 
@@ -141,6 +141,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-probes", action="store_true", help="the straight sweeps only")
     ap.add_argument("--every", type=int, default=24, help="score the estimate every this many wraps too")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--arm", default="default", help="built-in arm name or a URDF (explore3d arm writes one)")
     ap.add_argument("--out", type=Path, required=True, help="JSON-lines file (appended)")
     args = ap.parse_args(argv)
     if args.table:
@@ -162,7 +163,7 @@ def main(argv=None) -> int:
     for name in names:
         if (name, args.label) in done:
             continue
-        row = one(name, args.label, probe, args.no_probes, args.every, args.jobs)
+        row = one(name, args.label, probe, args.no_probes, args.every, args.jobs, args.arm)
         with args.out.open("a") as f:
             f.write(json.dumps(row) + "\n")
         print(json.dumps({k: row[k] for k in ("object", "label", "percent_error", "wraps", "explore_s")}),
