@@ -9,7 +9,7 @@ The public API::
     from explore3d import load_object, run, ExploreConfig, inverse_hull, shape_error
 
 The package is built in floors, each importing only from the floors below it (import-linter
-contracts in pyproject.toml): ``core`` < ``arm`` < ``geometry`` < ``robot`` < ``reconstruction``
+contracts in pyproject.toml): ``core`` < ``arm`` < ``geometry`` < ``grasp`` < ``robot`` < ``reconstruction``
 < ``feeling`` < ``strategy`` < ``world`` < ``app``; see docs/architecture.md.
 
 The names are imported on first use (PEP 562), so ``import explore3d`` and ``explore3d --help``
@@ -38,6 +38,8 @@ _EXPORTS = {
     "OutputConfig": "app.report", "run_and_report": "app.report", "quiet_c_output": "core.quiet",
     "SceneConfig": "core.settings", "SceneSetup": "world.scene", "SceneWatch": "world.scene",
     "settle_scene": "world.scene", "scene_explore_config": "world.scene",
+    "GripperSpec": "grasp.gripper", "GraspSet": "grasp.antipodal", "sample_grasps": "grasp.antipodal",
+    "execute_grasps": "world.grasping", "grasp_run": "app.grasp",
 }
 
 __all__ = sorted(_EXPORTS)

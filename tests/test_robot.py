@@ -33,7 +33,8 @@ WORLD_QUERIES = ("getContactPoints", "getClosestPoints", "rayTest", "rayTestBatc
 #: physics (world/support.py applies the support's rolling and spinning friction to the object, which
 #: the Dantzig solver drops; it returns nothing, and the strategy cannot import the world).
 EVALUATION_MODULES = {"world/quality.py", "world/replay.py", "geometry/sdf.py", "world/skin.py", "app/compare.py",
-                      "world/calibration.py", "app/pictures.py", "world/scene.py", "world/support.py"}
+                      "world/calibration.py", "app/pictures.py", "world/scene.py", "world/support.py",
+                      "world/grasping.py"}  # grasping: executing grasps on the truth (evaluation)
 
 
 def _vertical_base():

@@ -307,6 +307,18 @@ def build_parser() -> argparse.ArgumentParser:
     sr.add_argument("--no-thumbnails", dest="thumbnails", action="store_false", help="skip the thumbnails (faster)")
     sr.set_defaults(func=cmd_sweep_report)
 
+    g = sub.add_parser("grasp", help="plan grasps on a run's estimate, execute them on the true object, count",
+                       description="Plan --n antipodal parallel-jaw grasps on RUN_DIR's estimate, on the true mesh, "
+                                   "on the estimate's convex hull and on an early estimate (the first 8 wraps), "
+                                   "execute each on the true object resting on a table in PyBullet, and add the "
+                                   "success rates (95%% Wilson intervals) to RUN_DIR/report.json; also writes "
+                                   "grasps.json and grasps.png.")
+    g.add_argument("run_dir", help="a folder 'explore3d run' wrote (3D)")
+    g.add_argument("--n", type=_count("--n"), default=20, help="grasps planned on each mesh (default 20)")
+    g.add_argument("--seed", type=_count("--seed", 0), default=0, help="planner seed (default 0)")
+    g.add_argument("--no-pictures", action="store_true", help="no grasps.png")
+    g.set_defaults(func=cmd_grasp)
+
     o = sub.add_parser("objects", help="list the built-in objects with their sizes",
                        description="List the built-in objects (extents in mm, volume in cm^3).")
     o.add_argument("--json", action="store_true")
@@ -699,6 +711,36 @@ def cmd_arm(args) -> int:
     spec = arm_spec_from_args(args)
     path = write_arm_urdf(spec, args.out)
     print(f"arm {spec.name}: {spec.n_links} links of {spec.link_length} m (reach {spec.reach:.3f} m) -> {path}")
+    return 0
+
+
+def _count(name: str, least: int = 1):
+    def f(text):
+        try:
+            v = int(text)
+        except (TypeError, ValueError):
+            raise UsageError(f"{name} must be an integer >= {least}; got {text!r}") from None
+        if v < least:
+            raise UsageError(f"{name} must be an integer >= {least}; got {text!r}")
+        return v
+    f.__name__ = name  # argparse names the type in its own messages
+    return f
+
+
+def cmd_grasp(args) -> int:
+    with quiet_c_output():  # PyBullet's banners
+        from explore3d.app.grasp import SOURCES, GraspConfig, grasp_run  # start-up: kept out of --help's
+
+        entry = grasp_run(args.run_dir, GraspConfig(n=args.n, seed=args.seed), pictures=not args.no_pictures)
+    for name in SOURCES:
+        if name in entry:
+            r = entry[name]
+            rate = "-" if r["rate"] is None else f"{100 * r['rate']:.0f}%"
+            lo, hi = r["wilson_95"]
+            print(f"{name:12s} {r['held']:3d}/{r['planned']:<3d} held  {rate:>5s}  (95% {100 * lo:.0f}-{100 * hi:.0f}%)")
+        else:
+            print(f"{name:12s} skipped: {entry['skipped'].get(name, '')}")
+    print(f"-> {Path(args.run_dir) / 'report.json'} (grasp), grasps.json{'' if args.no_pictures else ', grasps.png'}")
     return 0
 
 
