@@ -314,8 +314,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "success rates (95%% Wilson intervals) to RUN_DIR/report.json; also writes "
                                    "grasps.json and grasps.png.")
     g.add_argument("run_dir", help="a folder 'explore3d run' wrote (3D)")
-    g.add_argument("--n", type=_count("--n"), default=20, help="grasps planned on each mesh (default 20)")
-    g.add_argument("--seed", type=_count("--seed", 0), default=0, help="planner seed (default 0)")
+    g.add_argument("--n", type=_int_min("--n"), default=20, help="grasps planned on each mesh (default 20)")
+    g.add_argument("--seed", type=_int_min("--seed", 0), default=0, help="planner seed (default 0)")
     g.add_argument("--no-pictures", action="store_true", help="no grasps.png")
     g.set_defaults(func=cmd_grasp)
 
@@ -712,19 +712,6 @@ def cmd_arm(args) -> int:
     path = write_arm_urdf(spec, args.out)
     print(f"arm {spec.name}: {spec.n_links} links of {spec.link_length} m (reach {spec.reach:.3f} m) -> {path}")
     return 0
-
-
-def _count(name: str, least: int = 1):
-    def f(text):
-        try:
-            v = int(text)
-        except (TypeError, ValueError):
-            raise UsageError(f"{name} must be an integer >= {least}; got {text!r}") from None
-        if v < least:
-            raise UsageError(f"{name} must be an integer >= {least}; got {text!r}")
-        return v
-    f.__name__ = name  # argparse names the type in its own messages
-    return f
 
 
 def cmd_grasp(args) -> int:

@@ -71,14 +71,6 @@ class GraspSet:
     def __len__(self) -> int:
         return int(len(self.widths))
 
-    def moved(self, offset) -> "GraspSet":
-        """The same grasps translated by ``offset`` (3,), metres (the object left where it was)."""
-        off = np.asarray(offset, dtype=float).reshape(3)
-        poses = self.poses.copy()
-        poses[:, :3, 3] += off
-        return GraspSet(poses, self.contacts + off, self.widths, self.openings, self.quality, self.angles,
-                        self.com_distances, self.n_antipodal)
-
     def to_dicts(self) -> list[dict]:
         """One JSON-ready dict per grasp: ``pose`` (4 x 4), ``contacts_m``, ``width_m``,
         ``opening_m``, ``quality``, ``angle_rad``, ``com_distance_m``."""

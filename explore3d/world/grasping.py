@@ -22,7 +22,6 @@ import tempfile
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from explore3d.core.interrupt import deferred_signals
 from explore3d.core.quiet import quiet_c_output
@@ -30,6 +29,7 @@ from explore3d.core.validate import check_field
 from explore3d.grasp.antipodal import GraspSet
 from explore3d.grasp.gripper import GripperSpec
 from explore3d.world.parts import convex_parts, parts_obj_text
+from explore3d.world.sim import _pose_from_T
 
 
 class Outcome(enum.Enum):
@@ -96,11 +96,6 @@ class GraspExecution:
         return self.outcome is Outcome.HELD
 
 
-def _pose(T) -> tuple[list, list]:
-    T = np.asarray(T, dtype=float)
-    return T[:3, 3].tolist(), Rotation.from_matrix(T[:3, :3]).as_quat().tolist()
-
-
 class _GraspWorld:
     """A PyBullet client with the table, the object and the gripper (built per grasp)."""
 
@@ -131,7 +126,7 @@ class _GraspWorld:
         self.T_grasp = np.asarray(T_grasp, float)
         T_start = self.T_grasp.copy()
         T_start[:3, 3] -= gripper.approach_m * self.T_grasp[:3, 2]
-        pos, quat = _pose(T_start)
+        pos, quat = _pose_from_T(T_start)
         self.gripper = p.createMultiBody(
             gripper.palm_mass_kg, shape(palm), basePosition=pos, baseOrientation=quat,
             linkMasses=[gripper.finger_mass_kg] * 2, linkCollisionShapeIndices=[shape(finger_l), shape(finger_r)],
