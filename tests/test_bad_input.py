@@ -198,6 +198,8 @@ CASES = [
     (["sweep", "cube", "--out", "@o", "--workers", "0"], 2, "workers"),
     (["sweep-report", "@nowhere"], 1, "nowhere"),
     (["objects", "--colour"], 2, "colour"),
+    (["grasp", "@nowhere"], 1, "report.json not found"),
+    (["grasp", "@o", "--n", "0"], 2, "--n must be an integer >= 1"),
     (["teleport"], 2, "teleport"),
 ]
 
