@@ -17,6 +17,7 @@ score intervals.  Frames: the run's world frame, metres.
 """
 from __future__ import annotations
 
+import io
 import json
 import math
 import time
@@ -177,13 +178,11 @@ def grasp_run(run_dir, config: GraspConfig = GraspConfig(), pictures: bool = Tru
 def grasp_picture(mesh, grasps: list[dict]) -> bytes:
     """PNG bytes: ``mesh`` (grey) with each grasp as the segment between its contacts and a stub
     back along its approach, green where it held and red where it failed; three views."""
-    import io
-
     import matplotlib  # start-up: kept out of explore3d --help's
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    import matplotlib.pyplot as plt  # start-up: kept out of explore3d --help's
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # start-up: kept out of explore3d --help's
 
     fig = plt.figure(figsize=(12, 4.4))
     V = np.asarray(mesh.vertices) * 1e3
