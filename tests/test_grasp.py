@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from explore3d.grasp.antipodal import GraspSet, sample_grasps
+from explore3d.grasp.antipodal import sample_grasps
 from explore3d.grasp.gripper import GripperSpec
 from explore3d.world.objects import load_object
 
@@ -103,11 +103,10 @@ def test_a_true_grasp_holds_and_one_moved_off_the_box_fails():
     top = g.poses[:, 2, 2] < -0.95  # approaching from above
     assert top.any()
     for i in np.flatnonzero(top):
-        T = g.poses[i].copy()
+        off = g.select([i])
+        T = off.poses[0]
         tips_z = T[2, 3] + grip.tip_m * T[2, 2]  # the finger tips' height at the grasp pose
         T[:3, 3] -= ((BOX[2] / 2 + 0.02 - tips_z) / -T[2, 2]) * T[:3, 2]  # back along the approach
-        off = GraspSet(T[None], g.contacts[i:i + 1], g.widths[i:i + 1], g.openings[i:i + 1], g.quality[i:i + 1],
-                       g.angles[i:i + 1], g.com_distances[i:i + 1])
         assert execute_grasps(box, off, grip)[0].outcome is Outcome.MISSED
 
 

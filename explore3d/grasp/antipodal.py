@@ -71,6 +71,12 @@ class GraspSet:
     def __len__(self) -> int:
         return int(len(self.widths))
 
+    def select(self, index) -> "GraspSet":
+        """The grasps at ``index`` (an index array or mask), in that order (copies)."""
+        idx = np.atleast_1d(np.arange(len(self))[index])
+        return GraspSet(self.poses[idx], self.contacts[idx], self.widths[idx], self.openings[idx], self.quality[idx],
+                        self.angles[idx], self.com_distances[idx], self.n_antipodal)
+
     def to_dicts(self) -> list[dict]:
         """One JSON-ready dict per grasp: ``pose`` (4 x 4), ``contacts_m``, ``width_m``,
         ``opening_m``, ``quality``, ``angle_rad``, ``com_distance_m``."""

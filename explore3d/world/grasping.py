@@ -168,24 +168,12 @@ class _GraspWorld:
         return float(self.p.getBasePositionAndOrientation(self.object)[0][2])
 
 
-def execute_grasp(truth, T_world_grasp, opening: float, gripper: GripperSpec = GripperSpec(),
-                  table_z: float | None = None, config: ExecutionConfig = ExecutionConfig()) -> GraspExecution:
-    """Execute one grasp on ``truth`` (closed trimesh, world frame, metres) resting on a table.
-
-    Args:
-        T_world_grasp: (4, 4) the grasp pose (:mod:`explore3d.grasp.gripper`).
-        opening: the fingers' opening on the approach, m.
-        table_z: the table top's height, m (default: the truth's lowest point).
-    """
-    return execute_grasps(truth, GraspSet(np.asarray(T_world_grasp, float)[None], np.zeros((1, 2, 3)),
-                                          np.array([opening]), np.array([opening]), np.zeros(1), np.zeros(1),
-                                          np.zeros(1)), gripper, table_z, config)[0]
-
-
 def execute_grasps(truth, grasps: GraspSet, gripper: GripperSpec = GripperSpec(), table_z: float | None = None,
                    config: ExecutionConfig = ExecutionConfig()) -> list[GraspExecution]:
-    """Execute every grasp of ``grasps`` (world frame) on ``truth``, each in a new world
-    (:func:`execute_grasp`); one :class:`GraspExecution` per grasp, in order."""
+    """Execute every grasp of ``grasps`` (world frame; only their poses and openings are used) on
+    ``truth`` (closed trimesh, world frame, metres) resting on a table whose top is ``table_z``
+    (m; default the truth's lowest point), each in a new world (module docstring); one
+    :class:`GraspExecution` per grasp, in order."""
     if not isinstance(gripper, GripperSpec) or not isinstance(config, ExecutionConfig):
         raise TypeError("gripper must be a GripperSpec and config an ExecutionConfig")
     table_z = float(truth.bounds[0, 2]) if table_z is None else float(table_z)
