@@ -117,6 +117,8 @@ CASES = [
     (["run", "cube", "--out", "@o", "--size", "0"], 2, "size"),
     (["run", "cube", "--out", "@o", "--centre", "1,2"], 2, "x,y,z"),
     (["run", "cube", "--out", "@o", "--centre", "1,2,nan"], 2, "centre"),
+    (["run", "cube", "--out", "@o", "--grasp", "-1"], 2, "--grasp must be an integer >= 0"),
+    (["run", "cube", "--out", "@o", "--mode", "planar", "--grasp", "5"], 2, "3D estimate"),
     (["run", "cube", "--out", "@o", "--radius", "-1"], 2, "radius"),
     (["run", "cube", "--out", "@o", "--jobs", "0"], 2, "jobs"),
     (["run", "cube", "--out", "@o", "--directions", "-1"], 2, "directions"),

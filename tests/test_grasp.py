@@ -119,8 +119,11 @@ def test_grasp_command_on_a_small_run(tmp_path, capsys):
 
     arm = write_arm_urdf(ArmSpec(name="small16", n_links=16, link_length=0.02), tmp_path / "small16.urdf")
     out = tmp_path / "run"
-    assert main(["run", "cube", "--out", str(out), "--arm", str(arm), "--directions", "24", "--offsets", "1",
-                 "--angles", "1", "--attempts", "1", "--probes", "0", "--no-pictures", "-q", "--jobs", "1"]) == 0
+    assert main(["run", "cube", "--out", str(out), "--arm", str(arm), *SMALL_RUN, "--no-pictures", "-q",
+                 "--jobs", "1", "--grasp", "4"]) == 0
+    from_run = json.loads((out / "report.json").read_text())
+    assert set(from_run["timings"]["grasp"]) == {"estimate", "truth", "convex_hull", "early"}
+    assert from_run["timings"]["grasp_s"] > 0
     capsys.readouterr()
     assert main(["grasp", str(out), "--n", "4"]) == 0
     printed = capsys.readouterr().out
@@ -138,6 +141,40 @@ def test_grasp_command_on_a_small_run(tmp_path, capsys):
     assert (out / "grasps.png").stat().st_size > 0 and "grasps.json" in report["files"]
     assert main(["grasp", str(out), "--n", "4", "--no-pictures"]) == 0
     assert json.loads((out / "report.json").read_text())["grasp"]["estimate"]["outcomes"] == entry["estimate"]["outcomes"]
+    # run --grasp 4 graded the same folder the same way
+    assert from_run["grasp"] == entry
+
+
+SMALL_RUN = ["--directions", "24", "--offsets", "1", "--angles", "1", "--attempts", "1", "--probes", "0"]
+
+
+def test_a_sweep_grades_by_grasping(tmp_path):
+    """The sweep key ``grasp``: each run's report row holds the grasp entry (its times in the
+    timings column, not in the report) and the sweep report gains the per-source success columns."""
+    from explore3d import ArmSpec, write_arm_urdf
+    from explore3d.app.sweep import read_rows, run_sweep
+    from explore3d.app.sweep_report import GRASP_COLUMNS, report_table
+
+    arm = str(write_arm_urdf(ArmSpec(name="small16", n_links=16, link_length=0.02), tmp_path / "small16.urdf"))
+    grid = {"arm": [arm], "directions": [24], "offsets": [1], "angles": [1], "attempts": [1], "probes": [0],
+            "grasp": [0, 3]}
+    s = run_sweep(["cube"], tmp_path / "s", grid, workers=1, progress=False)
+    assert (s.ran, s.ok) == (2, 2)
+    rows = read_rows(tmp_path / "s")
+    graded = [r for r in rows if json.loads(r["settings"]).get("grasp")]
+    plain = [r for r in rows if not json.loads(r["settings"]).get("grasp")]
+    assert len(graded) == len(plain) == 1
+    entry = json.loads(graded[0]["report"])["grasp"]
+    assert "grasp" not in json.loads(plain[0]["report"])
+    assert entry["truth"]["planned"] == 3 and entry["truth"]["held"] == 3
+    assert "grasp" in json.loads(graded[0]["timings"])["timings"]
+    assert graded[0]["percent_error"] == plain[0]["percent_error"]  # grading does not touch the run
+    header, table = report_table(rows)
+    assert all(c in header for c in GRASP_COLUMNS)
+    row = table[rows.index(graded[0])]
+    assert row[header.index("grasp_truth")] == 1.0
+    assert row[header.index("grasp_estimate")] == entry["estimate"]["rate"]
+    assert table[rows.index(plain[0])][header.index("grasp_truth")] is None
 
 
 def test_grasp_command_refuses_a_folder_without_a_run(tmp_path, capsys):

@@ -137,6 +137,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "minutes on large meshes); their time is report.json's timings.quality_s")
     q_.add_argument("--no-quality", dest="no_quality", action="store_true", default=None,
                     help="no contact-quality figures (the default; kept for older command lines)")
+    r.add_argument("--grasp", type=RUN_OPTIONS["grasp"], metavar="N",
+                   help="3d: after the run, plan N grasps on each of the estimate, the truth, the estimate's convex "
+                        "hull and an early estimate and execute them on the truth, as 'explore3d grasp' does "
+                        "(evaluation only; default 0: none); the rates go into report.json's grasp entry")
     r.add_argument("--sensing", type=RUN_OPTIONS["sensing"],
                    help="what the servos report: default (4096-count encoders, 1 mN m torque resolution and noise, "
                         "one step of delay) or ideal (exact, no delay)")
@@ -376,6 +380,9 @@ def cmd_run(args) -> int:
     if (opts.get("calibrate") or opts.get("face_offset")) and config.points != "links":
         raise UsageError("--calibrate and --face-offset correct the paper's link points; the localised contacts (the "
                          "default) lie on the links' surfaces already: add --points links, or drop them")
+    if opts.get("grasp") and config.mode != "3d":
+        raise UsageError(f"--grasp plans grasps on a 3D estimate; this run is --mode {config.mode}: drop --grasp or "
+                         "run --mode 3d")
 
     with quiet_c_output():  # PyBullet's banners (import, connect, solver switch, renderer)
         from explore3d.app.pipeline import NoContactError, ReconstructionError, check_run_inputs
@@ -428,11 +435,27 @@ def cmd_run(args) -> int:
         finally:
             if bar is not None:
                 bar.close()
+        if opts.get("grasp"):
+            from explore3d.app.grasp import GraspConfig, grasp_run  # start-up: kept out of --help's
+
+            grasp = grasp_run(out, GraspConfig(n=opts["grasp"]), pictures=not opts.get("no_pictures", False),
+                              truth=mesh)
     ex, err = res.exploration, res.error
     if not args.quiet:
         print(f"{opts['object']}: {err.percent:.2f} % error, IoU {err.iou:.3f}, {ex.n_wraps} wraps, "
               f"{len(ex.points)} points, {ex.wall_s:.1f} s -> {out}")
+        if opts.get("grasp"):
+            print(_grasp_line(grasp))
     return 0
+
+
+def _grasp_line(entry: dict) -> str:
+    """One line of a ``grasp`` entry: held / planned per source."""
+    from explore3d.app.grasp import SOURCES  # start-up: kept out of --help's
+
+    parts = [f"{name} {entry[name]['held']}/{entry[name]['planned']}" if name in entry else f"{name} skipped"
+             for name in SOURCES]
+    return "grasps held: " + ", ".join(parts)
 
 
 # --- other commands ------------------------------------------------------------------------------

@@ -89,11 +89,15 @@ def _estimate_path(run_dir: Path, report: dict) -> Path:
     raise RunError(f"{run_dir} has no estimate mesh in report.json's files; run 'explore3d run' into it again")
 
 
-def run_truth(report: dict) -> tuple[trimesh.Trimesh, float]:
+def run_truth(report: dict, mesh=None) -> tuple[trimesh.Trimesh, float]:
     """The true object of a run as it was explored (world frame; settled on its table in a
-    table scene) and the table height its grasps are executed at (its lowest point), m."""
+    table scene) and the table height its grasps are executed at (its lowest point), m.
+
+    ``mesh``: the object as the run was given it (before settling); None: loaded again from
+    report.json's object name, scale and size."""
     cfg = report["config"]
-    mesh = load_object(report["object"], scale=cfg.get("scale"), size=cfg.get("size"))
+    if mesh is None:
+        mesh = load_object(report["object"], scale=cfg.get("scale"), size=cfg.get("size"))
     scene = cfg["explore"].get("scene", {})
     if scene.get("table") and scene.get("resting"):
         setup = settle_scene(mesh, SceneConfig(**scene))
@@ -117,8 +121,8 @@ def early_estimate(run_dir: Path, report: dict, wraps: int) -> trimesh.Trimesh:
 def plan_and_execute(truth, sources: dict, table_z: float, config: GraspConfig = GraspConfig()) -> dict:
     """For each named mesh of ``sources`` (world frame), ``config.n`` grasps planned on it and
     executed on ``truth``: per source ``planned``, ``held``, ``rate`` (held over planned; None
-    when none was planned), ``wilson_95`` (lo, hi), ``outcomes`` (each grasp's), ``plan_s``,
-    ``execute_s``, and ``grasps`` (:meth:`GraspSet.to_dicts`)."""
+    when none was planned), ``wilson_95`` (lo, hi), ``outcomes`` (each grasp's), ``grasps``
+    (:meth:`GraspSet.to_dicts`) and ``timings`` (wall-clock ``plan_s``, ``execute_s``)."""
     out = {}
     for name, mesh in sources.items():
         t0 = time.perf_counter()
@@ -131,17 +135,19 @@ def plan_and_execute(truth, sources: dict, table_z: float, config: GraspConfig =
         lo, hi = wilson_interval(held, len(runs))
         out[name] = {"planned": len(grasps), "held": int(held), "rate": held / len(runs) if runs else None,
                      "wilson_95": [lo, hi], "outcomes": [r.outcome.value for r in runs],
-                     "plan_s": t1 - t0, "execute_s": t2 - t1,
+                     "timings": {"plan_s": t1 - t0, "execute_s": t2 - t1},
                      "grasps": [{**g, "outcome": r.outcome.value, "rise_m": r.rise_m}
                                 for g, r in zip(grasps.to_dicts(), runs)]}
     return out
 
 
-def grasp_run(run_dir, config: GraspConfig = GraspConfig(), pictures: bool = True) -> dict:
+def grasp_run(run_dir, config: GraspConfig = GraspConfig(), pictures: bool = True, truth=None) -> dict:
     """Plan and execute grasps for the run in ``run_dir`` (module docstring); adds a ``grasp``
-    entry to its report.json (rates, intervals, the configuration) and writes ``grasps.json``
-    (every grasp with its pose and outcome) and, with ``pictures``, ``grasps.png``.  Returns the
-    ``grasp`` entry."""
+    entry to its report.json (rates, intervals, the configuration) and its wall-clock times to
+    the report's ``timings`` (``grasp_s``, and ``grasp`` per source: ``plan_s``, ``execute_s``),
+    and writes ``grasps.json`` (every grasp with its pose and outcome) and, with ``pictures``,
+    ``grasps.png``.  ``truth``: the object mesh the run was given (None: loaded again, see
+    :func:`run_truth`).  Returns the ``grasp`` entry."""
     run_dir = Path(run_dir)
     path = run_dir / "report.json"
     if not path.is_file():
@@ -152,7 +158,7 @@ def grasp_run(run_dir, config: GraspConfig = GraspConfig(), pictures: bool = Tru
     if report.get("mode") != "3d":
         raise RunError(f"the run in {run_dir} is {report.get('mode')!r}: grasps need a 3D run's estimate")
     estimate = trimesh.load_mesh(_estimate_path(run_dir, report))
-    truth, table_z = run_truth(report)
+    truth, table_z = run_truth(report, truth)
     sources = {"estimate": estimate, "truth": truth, "convex_hull": estimate.convex_hull}
     skipped = {}
     try:
@@ -161,14 +167,17 @@ def grasp_run(run_dir, config: GraspConfig = GraspConfig(), pictures: bool = Tru
         skipped["early"] = str(exc).split("; ")[0]
     t0 = time.perf_counter()
     results = plan_and_execute(truth, sources, table_z, config)
-    entry = {"config": asdict(config), "table_z_m": table_z, "skipped": skipped, "total_s": time.perf_counter() - t0,
-             **{name: {k: v for k, v in r.items() if k != "grasps"} for name, r in results.items()}}
+    entry = {"config": asdict(config), "table_z_m": table_z, "skipped": skipped,
+             **{name: {k: v for k, v in r.items() if k not in ("grasps", "timings")} for name, r in results.items()}}
+    timings = report.setdefault("timings", {})
+    timings["grasp"] = {name: r["timings"] for name, r in results.items()}
     e, t = results["estimate"], results["truth"]
     entry["estimate_over_truth"] = (e["rate"] / t["rate"]) if e["rate"] is not None and t["rate"] else None
     atomic_write_text(run_dir / "grasps.json", json_text({name: r["grasps"] for name, r in results.items()}))
     if pictures:
         atomic_write_bytes(run_dir / "grasps.png", grasp_picture(estimate, results["estimate"]["grasps"]))
     report["grasp"] = entry
+    timings["grasp_s"] = time.perf_counter() - t0
     files = set(report.get("files", [])) | {"grasps.json"} | ({"grasps.png"} if pictures else set())
     report["files"] = sorted(files)
     atomic_write_text(path, json_text(report))

@@ -183,6 +183,9 @@ RUN_OPTIONS = {
     "encircle": _choice("encircle", ("straight", "curl-back")),
     # the world: the paper's idealised one, or the object resting on a table (explore3d.world.scene)
     "scene": _choice("scene", SCENE_NAMES),
+    # evaluation after the run: this many grasps planned on each of the estimate, the truth, the estimate's
+    # convex hull and an early estimate, executed on the truth (explore3d.app.grasp; 0: none)
+    "grasp": _int_min("--grasp", 0),
     # outputs
     "density": _positive("--density"),
     "height": _positive("--height"),
@@ -295,5 +298,5 @@ def explore_config(opts: dict):
 
 #: Settings a sweep's grid may sweep (explore3d.app.sweep), each an option of ``explore3d run`` (see ``explore3d run --help``).
 SWEEP_KEYS = ("a", "angles", "arm", "attempts", "base_step", "clearance", "collision_margin", "directions",
-              "encircle", "face_offset", "fingers", "method", "mirrored", "mode", "n_along", "n_height", "noise_seed", "offsets",
+              "encircle", "face_offset", "fingers", "grasp", "method", "mirrored", "mode", "n_along", "n_height", "noise_seed", "offsets",
               "points", "probe_rank", "probes", "scene", "seed", "sensing", "size")

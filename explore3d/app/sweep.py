@@ -78,6 +78,7 @@ from tqdm import tqdm
 
 from explore3d import __version__
 from explore3d.app.export import write_mesh
+from explore3d.app.grasp import GraspConfig, grasp_run
 from explore3d.app.report import OutputConfig, run_and_report
 from explore3d.app.settings import _BOOL_OPTIONS, RUN_DEFAULTS, RUN_OPTIONS, SWEEP_KEYS, UsageError, explore_config
 from explore3d.arm.urdf import load_arm
@@ -116,7 +117,8 @@ _REPORT_TIMING_KEYS = ("timings", "wall_s")
 
 #: Settings left out of the canonical settings when they have these values (what ``run`` does
 #: without them), so ``--grid a=0.05`` and no ``a`` at all are the same combination.
-_DEFAULTS = {"arm": "default", "method": "exponential", "mode": "3d", "encircle": "straight", "scene": "ideal"}
+_DEFAULTS = {"arm": "default", "method": "exponential", "mode": "3d", "encircle": "straight", "scene": "ideal",
+             "grasp": 0}
 
 _BOOL_WORDS = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
 
@@ -418,6 +420,11 @@ def execute(task: RunTask, vertices, faces, arm=None) -> dict:
             _, report = run_and_report(mesh, spec, config, d, output=OutputConfig(fmt="stl", pictures=False),
                                        a=float(opts["a"]), method=opts["method"], seed=task.seed,
                                        object_name=task.object, source={"size": s.get("size")})
+            if s.get("grasp"):  # evaluation after the run: grasps planned on it, executed on the truth
+                if config.mode != "3d":
+                    raise ValueError(f"grasp plans grasps on a 3D estimate; this run's mode is {config.mode!r}")
+                grasp_run(d, GraspConfig(n=s["grasp"]), pictures=False, truth=mesh)
+                report = json.loads((Path(d) / "report.json").read_text(encoding="utf-8"))
             files = {n: (Path(d) / n).read_bytes() for n in ("estimate.stl", "points.ply", "estimate_polygon.json")
                      if (Path(d) / n).is_file()}
         return {"status": "ok", "report": report, "files": files, "time_s": time.perf_counter() - t0}

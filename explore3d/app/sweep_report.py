@@ -4,7 +4,8 @@
 
 * ``report.md`` and ``report.csv``: one row per (object, settings, seed): the swept settings, the
   status, the error (volume error in 3D, area error planar, %), IoU, Chamfer distance (mm), the
-  run's time (s) and the failure reason; ``report.md`` also has a summary per object;
+  run's time (s) and the failure reason (and, when the sweep grades by grasping, the fraction of
+  grasps that held per source, :data:`GRASP_COLUMNS`); ``report.md`` also has a summary per object;
 * ``errors.png``: the error against each swept setting (matplotlib, Agg), one line per object
   and combination of the other settings;
 * ``report.html``: the table with a thumbnail per run (``thumbs/<key>.png``): the estimate
@@ -28,6 +29,7 @@ from pathlib import Path
 import trimesh
 from shapely.geometry import Polygon
 
+from explore3d.app.grasp import SOURCES
 from explore3d.app.pictures import _plt, _save, signed_distance_figure
 from explore3d.app.pipeline import planar_truth
 from explore3d.app.sweep import read_rows
@@ -62,17 +64,33 @@ def _value(row, key):
     return _settings(row).get(key, "(default)")
 
 
+#: Columns added after ``chamfer_mm`` when a run of the sweep was graded by grasping (the ``grasp``
+#: setting): the fraction of the grasps planned on each source that held on the truth
+#: (:mod:`explore3d.app.grasp`).
+GRASP_COLUMNS = tuple(f"grasp_{name}" for name in SOURCES)
+
+
+def _grasp_rates(row) -> list:
+    entry = json.loads(row["report"]).get("grasp") if row["status"] == "ok" and row["report"] else None
+    return [None if entry is None or name not in entry else entry[name]["rate"] for name in SOURCES]
+
+
 def report_table(rows) -> tuple[list[str], list[list]]:
     """Header and rows (values, not text) of the per-run table: object, swept settings,
-    :data:`RESULT_COLUMNS`."""
+    :data:`RESULT_COLUMNS` (with :data:`GRASP_COLUMNS` after ``chamfer_mm`` when any run was
+    graded by grasping)."""
     keys = swept_keys(rows)
-    header = ["object", *keys, *RESULT_COLUMNS]
+    grasps = [_grasp_rates(r) for r in rows]
+    graded = any(v is not None for g in grasps for v in g)
+    extra = list(GRASP_COLUMNS) if graded else []
+    header = ["object", *keys, *RESULT_COLUMNS[:4], *extra, *RESULT_COLUMNS[4:]]
     out = []
-    for r in rows:
+    for r, g in zip(rows, grasps):
         ok = r["status"] == "ok"
         out.append([r["object"], *(_value(r, k) for k in keys), r["status"],
                     r["percent_error"] if ok else None, r["iou"] if ok else None,
-                    1e3 * r["chamfer_m"] if ok else None, r["time_s"], r["reason"] or "", r["key"]])
+                    1e3 * r["chamfer_m"] if ok else None, *(g if graded else []), r["time_s"], r["reason"] or "",
+                    r["key"]])
     return header, out
 
 
@@ -86,7 +104,7 @@ def _fmt(v, digits=3) -> str:
 
 def _cells(header, row) -> list[str]:
     """Text of a table row: results rounded, settings as given."""
-    fmt = {"error_percent": 2, "iou": 3, "chamfer_mm": 2, "time_s": 1}
+    fmt = {"error_percent": 2, "iou": 3, "chamfer_mm": 2, "time_s": 1, **{c: 2 for c in GRASP_COLUMNS}}
     return [_fmt(v, fmt[h]) if h in fmt else ("" if v is None else str(v)) for h, v in zip(header, row)]
 
 
