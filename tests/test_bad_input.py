@@ -202,6 +202,7 @@ CASES = [
     (["objects", "--colour"], 2, "colour"),
     (["grasp", "@nowhere"], 1, "report.json not found"),
     (["grasp", "@o", "--n", "0"], 2, "--n must be an integer >= 1"),
+    (["grasp", "@o", "--friction", "0"], 2, "--friction must be > 0"),
     (["teleport"], 2, "teleport"),
 ]
 

@@ -320,6 +320,12 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("run_dir", help="a folder 'explore3d run' wrote (3D)")
     g.add_argument("--n", type=_int_min("--n"), default=20, help="grasps planned on each mesh (default 20)")
     g.add_argument("--seed", type=_int_min("--seed", 0), default=0, help="planner seed (default 0)")
+    g.add_argument("--friction", type=_positive("--friction"), default=None,
+                   help="pad friction coefficient, the planner's friction cone and the execution's (default 0.8)")
+    g.add_argument("--grip-force", dest="grip_force", type=_positive("--grip-force"), default=None,
+                   help="force each finger presses with, N (default 20)")
+    g.add_argument("--density", type=_positive("--density"), default=None,
+                   help="the true object's density in the execution, kg/m^3 (default 500)")
     g.add_argument("--no-pictures", action="store_true", help="no grasps.png")
     g.set_defaults(func=cmd_grasp)
 
@@ -737,17 +743,31 @@ def cmd_arm(args) -> int:
     return 0
 
 
+def grasp_config(args):
+    """The :class:`~explore3d.app.grasp.GraspConfig` of ``explore3d grasp``'s options."""
+    from explore3d.app.grasp import GraspConfig  # start-up: kept out of --help's
+    from explore3d.grasp.gripper import GripperSpec  # start-up: kept out of --help's
+    from explore3d.world.grasping import ExecutionConfig  # start-up: kept out of --help's
+
+    gripper = {k: v for k, v in (("friction", args.friction), ("grip_force_n", args.grip_force)) if v is not None}
+    execution = {} if args.density is None else {"density": args.density}
+    return GraspConfig(n=args.n, seed=args.seed, gripper=GripperSpec(**gripper),
+                       execution=ExecutionConfig(**execution))
+
+
 def cmd_grasp(args) -> int:
     with quiet_c_output():  # PyBullet's banners
-        from explore3d.app.grasp import SOURCES, GraspConfig, grasp_run  # start-up: kept out of --help's
+        from explore3d.app.grasp import SOURCES, grasp_run  # start-up: kept out of --help's
 
-        entry = grasp_run(args.run_dir, GraspConfig(n=args.n, seed=args.seed), pictures=not args.no_pictures)
+        entry = grasp_run(args.run_dir, grasp_config(args), pictures=not args.no_pictures)
     for name in SOURCES:
         if name in entry:
             r = entry[name]
             rate = "-" if r["rate"] is None else f"{100 * r['rate']:.0f}%"
             lo, hi = r["wilson_95"]
-            print(f"{name:12s} {r['held']:3d}/{r['planned']:<3d} held  {rate:>5s}  (95% {100 * lo:.0f}-{100 * hi:.0f}%)")
+            push = "" if r["push_median_m"] is None else f"  push {1e3 * r['push_median_m']:.1f} mm (median)"
+            print(f"{name:12s} {r['held']:3d}/{r['planned']:<3d} held  {rate:>5s}  (95% {100 * lo:.0f}-{100 * hi:.0f}%)"
+                  f"{push}")
         else:
             print(f"{name:12s} skipped: {entry['skipped'].get(name, '')}")
     print(f"-> {Path(args.run_dir) / 'report.json'} (grasp), grasps.json{'' if args.no_pictures else ', grasps.png'}")

@@ -121,7 +121,9 @@ def early_estimate(run_dir: Path, report: dict, wraps: int) -> trimesh.Trimesh:
 def plan_and_execute(truth, sources: dict, table_z: float, config: GraspConfig = GraspConfig()) -> dict:
     """For each named mesh of ``sources`` (world frame), ``config.n`` grasps planned on it and
     executed on ``truth``: per source ``planned``, ``held``, ``rate`` (held over planned; None
-    when none was planned), ``wilson_95`` (lo, hi), ``outcomes`` (each grasp's), ``grasps``
+    when none was planned), ``wilson_95`` (lo, hi), ``outcomes`` (each grasp's),
+    ``push_median_m`` and ``push_max_m`` (how far closing moved the object,
+    :attr:`~explore3d.world.grasping.GraspExecution.push_m`; None when none was planned), ``grasps``
     (:meth:`GraspSet.to_dicts`) and ``timings`` (wall-clock ``plan_s``, ``execute_s``)."""
     out = {}
     for name, mesh in sources.items():
@@ -133,10 +135,13 @@ def plan_and_execute(truth, sources: dict, table_z: float, config: GraspConfig =
         t2 = time.perf_counter()
         held = sum(r.outcome is Outcome.HELD for r in runs)
         lo, hi = wilson_interval(held, len(runs))
+        push = [r.push_m for r in runs]
         out[name] = {"planned": len(grasps), "held": int(held), "rate": held / len(runs) if runs else None,
                      "wilson_95": [lo, hi], "outcomes": [r.outcome.value for r in runs],
+                     "push_median_m": float(np.median(push)) if push else None,
+                     "push_max_m": float(np.max(push)) if push else None,
                      "timings": {"plan_s": t1 - t0, "execute_s": t2 - t1},
-                     "grasps": [{**g, "outcome": r.outcome.value, "rise_m": r.rise_m}
+                     "grasps": [{**g, "outcome": r.outcome.value, "rise_m": r.rise_m, "push_m": r.push_m}
                                 for g, r in zip(grasps.to_dicts(), runs)]}
     return out
 

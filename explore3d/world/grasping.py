@@ -85,11 +85,15 @@ class ExecutionConfig:
 @dataclass(frozen=True)
 class GraspExecution:
     """One executed grasp: its ``outcome``, the object's final and largest rise of its centre of
-    mass, m."""
+    mass, m, and ``push_m``: how far the object's centre of mass moved from the start of the
+    approach to the end of the closing, m.  A grasp planned where the true surface is closes
+    both fingers on it at once and barely moves the object; one planned on a surface that is not
+    there pushes it with the first finger that touches (or knocks it with the approach)."""
 
     outcome: Outcome
     rise_m: float
     max_rise_m: float
+    push_m: float = 0.0
 
     @property
     def held(self) -> bool:
@@ -164,8 +168,12 @@ class _GraspWorld:
     def move_to(self, position) -> None:
         self.p.changeConstraint(self.constraint, [float(x) for x in position], self.quat, maxForce=2000.0)
 
+    def object_position(self) -> np.ndarray:
+        """(3,) the object's centre of mass, world frame, m (evaluation: the world's own state)."""
+        return np.array(self.p.getBasePositionAndOrientation(self.object)[0], dtype=np.float64)
+
     def object_z(self) -> float:
-        return float(self.p.getBasePositionAndOrientation(self.object)[0][2])
+        return float(self.object_position()[2])
 
 
 def execute_grasps(truth, grasps: GraspSet, gripper: GripperSpec = GripperSpec(), table_z: float | None = None,
@@ -198,7 +206,8 @@ def _execute(obj_path, com, mass, table_z, T_grasp, opening, gripper, config) ->
         steps = lambda s: max(1, int(math.ceil(s / dt)))  # noqa: E731
         for _ in range(steps(config.settle_s)):
             p.stepSimulation()
-        z0 = world.object_z()
+        p0 = world.object_position()
+        z0 = float(p0[2])
         start = world.T_grasp[:3, 3] - gripper.approach_m * world.T_grasp[:3, 2]
         n = steps(config.approach_s)
         for k in range(1, n + 1):
@@ -207,6 +216,7 @@ def _execute(obj_path, com, mass, table_z, T_grasp, opening, gripper, config) ->
         world.close_fingers(gripper.grip_force_n)
         for _ in range(steps(config.close_s)):
             p.stepSimulation()
+        push = float(np.linalg.norm(world.object_position() - p0))
         top, best = world.T_grasp[:3, 3].copy(), 0.0
         n = steps(config.lift_s)
         for k in range(1, n + 1):
@@ -229,4 +239,4 @@ def _execute(obj_path, com, mass, table_z, T_grasp, opening, gripper, config) ->
         p.disconnect()
     enough = 0.5 * config.lift_m
     outcome = Outcome.HELD if rise >= enough else Outcome.DROPPED if best >= enough else Outcome.MISSED
-    return GraspExecution(outcome=outcome, rise_m=float(rise), max_rise_m=float(max(best, rise)))
+    return GraspExecution(outcome=outcome, rise_m=float(rise), max_rise_m=float(max(best, rise)), push_m=push)
