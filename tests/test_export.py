@@ -363,3 +363,149 @@ def test_3d_pictures_are_pngs(tmp_path):
     for name in ("views.png", "overview.png"):
         data = (tmp_path / name).read_bytes()
         assert data.startswith(PNG_MAGIC) and len(data) > 5000
+
+
+def _saved_figures(monkeypatch):
+    """The figures the pictures save (still readable after they are closed), in order."""
+    from explore3d.app import pictures
+
+    figs, save = [], pictures._save
+    monkeypatch.setattr(pictures, "_save", lambda fig, path: (figs.append(fig), save(fig, path))[1])
+    return figs
+
+
+def _draw_order(ax):
+    """The collections of a 3D axes in the order they are drawn (its computed z-order off)."""
+    return sorted(ax.collections, key=lambda c: c.get_zorder())  # stable: ties keep their order
+
+
+@pytest.mark.parametrize("truth_name,estimate_name", [("cube", "sphere"), ("cube", "cube"), ("sphere", "cylinder")])
+def test_3d_views_axes_in_mm_ticks_legend_and_the_truth_on_top(tmp_path, monkeypatch, truth_name, estimate_name):
+    """Every 3D axis not seen end-on is labelled in mm with at most MAX_TICKS_3D + 1 ticks showing
+    1000 x the coordinate (metres); the end-on axis has no tick labels and the view's title names
+    it; the truth's outline (sharp edges, or sections of a smooth truth) is drawn after the estimate;
+    the legend names estimate, truth and the points."""
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Path3DCollection, Poly3DCollection
+
+    from explore3d.app import pictures
+
+    figs = _saved_figures(monkeypatch)
+    truth, est = load_object(truth_name), load_object(estimate_name)
+    pts = np.random.default_rng(0).uniform(-0.04, 0.04, size=(50, 3))
+    pictures.views_figure(est, truth, tmp_path / "views.png", points=pts)
+    pictures.views_figure(est, truth, tmp_path / "links.png", points=pts, points_name="link points")
+    pictures.overview_figure(tmp_path / "overview.png", {"error %": 1.0}, estimate_mesh=est, truth_mesh=truth,
+                             points=pts)
+    for fig, name in zip(figs, ["contacts", "link points", "contacts"]):
+        texts = [t.get_text() for t in fig.legends[0].get_texts()]
+        assert texts[0] == "estimate" and texts[1].startswith("truth") and texts[2] == name
+        axes3d = [ax for ax in fig.axes if ax.name == "3d"]
+        assert [ax.get_title().split()[0] for ax in axes3d] == list(pictures.VIEW_NAMES)
+        for ax, view in zip(axes3d, pictures.VIEW_NAMES):
+            end_on = pictures.END_ON.get(view)
+            for a in "xyz":
+                axis, label = getattr(ax, f"{a}axis"), getattr(ax, f"get_{a}label")()
+                shown = [t.get_text() for t in axis.get_ticklabels() if t.get_text()]
+                if a == end_on:
+                    assert shown == [] and label == "" and f"{a}" in ax.get_title().split("(")[1]
+                    continue
+                assert label == f"{a} [mm]"
+                lo, hi = sorted(getattr(ax, f"get_{a}lim")())
+                locs = [v for v in axis.get_majorticklocs() if lo - 1e-12 <= v <= hi + 1e-12]
+                assert 2 <= len(locs) <= pictures.MAX_TICKS_3D + 1
+                labels = dict(zip(axis.get_majorticklocs(), [t.get_text() for t in axis.get_ticklabels()]))
+                for v in locs:
+                    assert float(labels[v]) == pytest.approx(1e3 * v, abs=1e-6)
+            assert ax.computed_zorder is False
+            order = _draw_order(ax)
+            surfaces = [i for i, c in enumerate(order) if isinstance(c, Poly3DCollection)]
+            lines = [i for i, c in enumerate(order) if isinstance(c, Line3DCollection)]
+            dots = [i for i, c in enumerate(order) if isinstance(c, Path3DCollection)]
+            assert len(surfaces) == 2 and len(lines) == 1 and len(dots) == 1  # truth, estimate; outline; points
+            assert lines[0] > surfaces[1] and dots[0] > surfaces[1]
+            assert len(order[lines[0]].get_segments()) == len(pictures.truth_lines(truth, end_on)) > 0
+
+
+def test_truth_lines_are_sharp_edges_or_sections():
+    from explore3d.app import pictures
+
+    cube = load_object("cube")
+    assert len(pictures.truth_lines(cube)) == 12  # its edges (the faces' diagonals are flat)
+    top = pictures.truth_lines(cube, "z")
+    assert len(top) > 12 and np.allclose(top[12:, :, 2], 0.0)  # + its section at mid-height
+    sphere = load_object("sphere")  # no sharp edge: three great circles
+    segs = pictures.truth_lines(sphere)
+    assert len(segs) > 30
+    np.testing.assert_allclose(np.linalg.norm(segs, axis=2), 0.05, rtol=0.02)
+
+
+def _planar_exploration(points: str):
+    import types
+
+    from explore3d.arm.spec import ArmSpec
+
+    spec = ArmSpec(name="tiny", n_links=6)
+    attempt = types.SimpleNamespace(q=np.full(6, 0.3), T_world_base=np.eye(4))
+    P = np.random.default_rng(0).uniform(-0.04, 0.04, size=(20, 2))
+    return types.SimpleNamespace(spec=spec, attempts=((attempt,),), points=P, point_wrap=np.zeros(20, dtype=int),
+                                 config=types.SimpleNamespace(points=points))
+
+
+@pytest.mark.parametrize("points,name", [("contacts", "contacts"), ("links", "link points")])
+def test_planar_figure_legend_names_the_points(tmp_path, monkeypatch, points, name):
+    """The planar figure's and overview's legends say what the points are: localised contacts
+    (the default) or the paper's link points (points="links")."""
+    import shapely
+
+    from explore3d.app import pictures
+    from explore3d.strategy.explore import ExploreConfig
+
+    assert pictures.points_label(ExploreConfig(points=points)) == name
+    figs = _saved_figures(monkeypatch)
+    ex = _planar_exploration(points)
+    est, truth = shapely.box(-0.04, -0.04, 0.04, 0.04), shapely.box(-0.035, -0.04, 0.04, 0.04)
+    pictures.planar_figure(ex, est, truth, tmp_path / "figure.png")
+    pictures.overview_figure(tmp_path / "overview.png", {}, points=ex.points, estimate_polygon=est,
+                             truth_polygon=truth, points_name=pictures.points_label(ex.config))
+    texts = [t.get_text() for t in figs[0].axes[0].get_legend().get_texts()]
+    assert f"wrap 1: {name}" in texts and not any(other in t for t in texts
+                                                  for other in {"contacts", "link points"} - {name})
+    assert name in [t.get_text() for t in figs[1].axes[0].get_legend().get_texts()]
+
+
+def _ndc(view, proj, P):
+    """PyBullet's column-major view and projection matrices applied to world points (k, 3): (k, 3) NDC."""
+    M = np.reshape(proj, (4, 4), order="F") @ np.reshape(view, (4, 4), order="F")
+    h = np.c_[P, np.ones(len(P))] @ M.T
+    assert np.all(h[:, 3] > 0)  # in front of the camera
+    return h[:, :3] / h[:, 3:]
+
+
+@pytest.mark.parametrize("n_links,base,q", [(6, [-0.06, -0.05, 0.0], 0.0), (24, [-0.1, 0.02, 0.03], 0.0),
+                                            (24, [0.0, -0.12, 0.0], 0.25)])
+def test_scene_camera_frames_the_arm_and_the_object(n_links, base, q):
+    """The base, the base block, every joint and the tip of the arm (straight or curled) and the
+    object's bounding box project inside the image, and they fill it (not a speck in the middle)."""
+    import types
+
+    from explore3d.app import pictures
+    from explore3d.arm.kinematics import link_transforms
+    from explore3d.arm.spec import ArmSpec
+
+    spec = ArmSpec(name="arm", n_links=n_links)
+    T = np.eye(4)
+    T[:3, :3] = trimesh.transformations.rotation_matrix(0.7, [0, 0, 1])[:3, :3]
+    T[:3, 3] = base
+    attempt = types.SimpleNamespace(q=np.full(n_links, q), T_world_base=T)
+    truth = load_object("cube")
+    view, proj = pictures.scene_camera(truth, spec, attempt, 480, 360)
+    L = link_transforms(spec, attempt.q, T)
+    tip = (L[-1] @ [spec.link_length, 0.0, 0.0, 1.0])[:3]
+    behind_base = (T @ [-spec.base_size, 0.0, 0.0, 1.0])[:3]
+    corners = np.array(np.meshgrid(*truth.bounds.T)).reshape(3, -1).T
+    P = np.vstack([T[:3, 3], behind_base, L[:, :3, 3], tip, corners])
+    ndc = _ndc(view, proj, P)
+    assert np.all(np.abs(ndc) < 1.0)
+    assert np.max(np.abs(ndc[:, :2])) > 0.7
+    if n_links == 24 and q == 0.0:  # the long straight arm reaches far past the object (the old camera cut it)
+        assert np.linalg.norm(tip - truth.bounds.mean(axis=0)) > 0.3

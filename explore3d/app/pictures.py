@@ -1,18 +1,18 @@
 """Pictures of an exploration (matplotlib, Agg backend: no display needed; PNG files, atomic).
 
-* :func:`planar_figure`: the paper's figure style: the arm (joint positions) and link surface
-  points of each attempt coloured by wrap, the generated polygon over the true one, a legend and
-  the percent error in the title.
-* :func:`views_figure`: estimate (blue) over truth (grey, translucent) from several view
-  directions with matplotlib's ``plot_trisurf``.
+* :func:`planar_figure`: the paper's figure style: the arm (joint positions) and the points
+  (localised contacts, or the paper's link points: :func:`points_label`) of each attempt coloured
+  by wrap, the generated polygon over the true one, a legend and the percent error in the title.
+* :func:`views_figure`: estimate (blue, translucent) over truth (grey fill, its outline in black
+  on top) and the points (red) from several view directions, axes in mm, a legend.
 * :func:`scene_image`: PyBullet's TinyRenderer (DIRECT client, no GUI) of the truth mesh and the
-  arm at one attempt's final joint angles.
+  arm at one attempt's final joint angles, the camera (:func:`scene_camera`) framing both.
 * :func:`overview_figure`: one page with views and the numbers.
 * :func:`signed_distance_figure`: the estimate coloured by its signed distance to the truth, mm
   (:func:`signed_distance_mm`; positive outside the truth: where the estimate is too big), a
   diverging colormap centred on 0 with a colorbar.
 
-All coordinates are metres in the world frame (= the object's own frame).
+All coordinates are metres in the world frame (= the object's own frame); the 3D views' ticks show mm.
 """
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from explore3d.arm.kinematics import link_transforms
+from explore3d.arm.spec import BASE_GAP_M
 from explore3d.arm.urdf import arm_urdf
 from explore3d.core.io import atomic_path
 from explore3d.core.quiet import quiet_c_output
@@ -75,11 +76,18 @@ def _err_title(err) -> str:
     return "" if err is None else f" - error {err.percent:.2f} %, IoU {err.iou:.3f}"
 
 
+def points_label(config) -> str:
+    """What an exploration's points are, for a legend: ``"contacts"`` (localised contacts, the
+    default ``ExploreConfig.points``) or ``"link points"`` (the paper's, ``points="links"``)."""
+    return "link points" if config.points == "links" else "contacts"
+
+
 def planar_figure(exploration, estimate_polygon, truth_polygon, path, err=None, title: str = "") -> Path:
     """Paper-style planar figure (PNG) at ``path``; returns it.
 
     Args:
-        exploration: an :class:`explore3d.strategy.explore.Exploration` in planar mode (points (m, 2)).
+        exploration: an :class:`explore3d.strategy.explore.Exploration` in planar mode (points (m, 2),
+            named in the legend by :func:`points_label` of its config).
         estimate_polygon, truth_polygon: shapely polygons, world x-y, metres.
         err: optional :class:`explore3d.geometry.metrics.ShapeError` for the title.
     """
@@ -87,6 +95,7 @@ def planar_figure(exploration, estimate_polygon, truth_polygon, path, err=None, 
     fig, ax = plt.subplots(figsize=(6, 6))
     cmap = plt.get_cmap("tab10")
     P = np.asarray(exploration.points)[:, :2]
+    what = points_label(exploration.config)
     lines = arm_polylines(exploration)
     for w, rows in enumerate(lines):
         c = cmap(w % 10)
@@ -94,7 +103,7 @@ def planar_figure(exploration, estimate_polygon, truth_polygon, path, err=None, 
             ax.plot(xy[:, 0], xy[:, 1], "-o", color=c, ms=2.5, lw=1.0, alpha=0.45 + 0.55 * (k + 1) / len(rows),
                     label=f"wrap {w + 1}: arm" if k == 0 else None)
         sel = exploration.point_wrap == w
-        ax.plot(P[sel, 0], P[sel, 1], ".", color=c, ms=3, label=f"wrap {w + 1}: link points")
+        ax.plot(P[sel, 0], P[sel, 1], ".", color=c, ms=3, label=f"wrap {w + 1}: {what}")
     for i, ring in enumerate(_rings(truth_polygon)):
         ax.fill(ring[:, 0], ring[:, 1], color="0.6", alpha=0.35, label="true shape" if i == 0 else None)
     for i, ring in enumerate(_rings(estimate_polygon)):
@@ -111,12 +120,77 @@ def planar_figure(exploration, estimate_polygon, truth_polygon, path, err=None, 
 #: (elevation, azimuth) in degrees of the views of :func:`views_figure`.
 VIEWS = ((25.0, -60.0), (90.0, -90.0), (0.0, -90.0), (0.0, 0.0))
 VIEW_NAMES = ("iso", "top", "front", "side")
+#: The axis each axis-aligned view looks along (its title says so): seen end-on, its tick labels
+#: would pile up and its label would sit by another axis's (both are left out); these views are
+#: drawn in orthographic projection.
+END_ON = {"top": "z", "front": "y", "side": "x"}
+END_ON_WORDS = {"top": "looking down -z", "front": "looking along +y", "side": "looking along -x"}
 
-#: At most this many link points are drawn in a 3D view (readability and file size).
+#: At most this many points are drawn in a 3D view (readability and file size).
 MAX_DRAWN_POINTS = 3000
+#: At most this many ticks per axis of a 3D view (more pile up into clumps).
+MAX_TICKS_3D = 4
+
+ESTIMATE_STYLE = {"color": "tab:blue", "alpha": 0.35, "edgecolor": (0.0, 0.0, 0.5, 0.4), "linewidth": 0.2}
+TRUTH_FILL = {"color": "0.6", "alpha": 0.2}
+TRUTH_LINE = {"color": "black", "linewidth": 0.9}
+POINTS_COLOR = "crimson"
 
 
-def _draw_mesh_views(fig, axes_slots, estimate_mesh, truth_mesh, points=None):
+def _mm(value, _pos=None) -> str:
+    """A tick label in mm of a coordinate in metres."""
+    return f"{round(1e3 * value, 6) + 0.0:g}"
+
+
+def _mm_axes_3d(ax, end_on: str | None = None) -> None:
+    """x, y, z labels in mm (the coordinates are metres; the ticks show mm), at most
+    :data:`MAX_TICKS_3D` ticks an axis; the axis ``end_on`` ("x", "y", "z") seen end-on has neither
+    (and the view is orthographic)."""
+    from matplotlib.ticker import FuncFormatter, MaxNLocator, NullFormatter  # start-up: kept out of --help's
+
+    for name in "xyz":
+        axis = getattr(ax, f"{name}axis")
+        axis.set_major_locator(MaxNLocator(MAX_TICKS_3D))
+        axis.set_major_formatter(NullFormatter() if name == end_on else FuncFormatter(_mm))
+        getattr(ax, f"set_{name}label")("" if name == end_on else f"{name} [mm]", fontsize=7, labelpad=2)
+    ax.tick_params(labelsize=6, pad=0)
+    if end_on:
+        ax.set_proj_type("ortho")
+
+
+def truth_lines(mesh, along: str | None = None) -> np.ndarray:
+    """(k, 2, 3) segments, metres, drawn for the truth over the estimate: its edges sharper than
+    :data:`TRUTH_EDGE_ANGLE_DEG` and its section by the plane through its bounding box's centre
+    normal to the view direction ``along`` ("x", "y", "z": an outline a smooth surface lacks), or
+    with ``along`` None and no sharp edge (a sphere), its sections normal to x, y and z."""
+    sharp = mesh.face_adjacency_angles > np.radians(TRUTH_EDGE_ANGLE_DEG)
+    segs = [np.asarray(mesh.vertices)[mesh.face_adjacency_edges[sharp]].reshape(-1, 2, 3)]
+    centre = np.asarray(mesh.bounds, dtype=float).mean(axis=0)
+    axes = "xyz" if along is None and not sharp.any() else (along or "")
+    for a in axes:
+        normal = np.eye(3)["xyz".index(a)]
+        segs.append(np.asarray(trimesh.intersections.mesh_plane(mesh, normal, centre), dtype=float).reshape(-1, 2, 3))
+    return np.concatenate(segs)
+
+
+def _legend(fig, points_name: str | None) -> None:
+    """The figure's legend: estimate, truth and (when drawn) the points named ``points_name``."""
+    from matplotlib.lines import Line2D  # start-up: matplotlib kept out of explore3d --help's
+    from matplotlib.patches import Patch  # start-up: as above
+
+    handles = [Patch(facecolor=ESTIMATE_STYLE["color"], alpha=ESTIMATE_STYLE["alpha"] + 0.15,
+                     edgecolor=ESTIMATE_STYLE["edgecolor"], label="estimate"),
+               Patch(facecolor=(0.6, 0.6, 0.6, 0.3), edgecolor=TRUTH_LINE["color"], label="truth (outline in black)")]
+    if points_name:
+        handles.append(Line2D([], [], ls="", marker="o", ms=4, color=POINTS_COLOR, label=points_name))
+    fig.legend(handles=handles, loc="upper center", ncol=len(handles), fontsize=9, frameon=False,
+               bbox_to_anchor=(0.5, 0.955))
+
+
+def _draw_mesh_views(fig, axes_slots, estimate_mesh, truth_mesh, points=None, points_name: str = "contacts"):
+    """The :data:`VIEWS` of the meshes (and points) into subplots ``axes_slots`` of ``fig``, with the legend."""
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection  # start-up: matplotlib kept out of explore3d --help's
+
     lo = np.minimum(estimate_mesh.bounds[0], truth_mesh.bounds[0])
     hi = np.maximum(estimate_mesh.bounds[1], truth_mesh.bounds[1])
     c, r = (lo + hi) / 2.0, float((hi - lo).max()) / 2.0
@@ -128,35 +202,101 @@ def _draw_mesh_views(fig, axes_slots, estimate_mesh, truth_mesh, points=None):
             P = P[np.random.default_rng(0).choice(len(P), MAX_DRAWN_POINTS, replace=False)]
     for slot, (elev, azim), name in zip(axes_slots, VIEWS, VIEW_NAMES):
         ax = fig.add_subplot(*slot, projection="3d")
+        ax.computed_zorder = False  # drawn in order: the truth's outline and the points over the estimate
         v, f = truth_mesh.vertices, truth_mesh.faces
-        ax.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=f, color="0.6", alpha=0.25, linewidth=0)
+        ax.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=f, linewidth=0, **TRUTH_FILL)
         v, f = estimate_mesh.vertices, estimate_mesh.faces
-        ax.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=f, color="tab:blue", alpha=0.6,
-                        edgecolor="navy", linewidth=0.2)
+        ax.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=f, **ESTIMATE_STYLE)
+        end_on = END_ON.get(name)
+        outline = truth_lines(truth_mesh, end_on)
+        if len(outline):
+            ax.add_collection3d(Line3DCollection(outline, colors=TRUTH_LINE["color"],
+                                                 linewidths=TRUTH_LINE["linewidth"]))
         if P is not None and len(P):
-            ax.scatter(P[:, 0], P[:, 1], P[:, 2], s=1, color="crimson", alpha=0.4)
+            ax.scatter(P[:, 0], P[:, 1], P[:, 2], s=2, color=POINTS_COLOR, alpha=0.6, depthshade=False)
         ax.set_xlim(c[0] - r, c[0] + r)
         ax.set_ylim(c[1] - r, c[1] + r)
         ax.set_zlim(c[2] - r, c[2] + r)
         ax.set_box_aspect((1, 1, 1))
         ax.view_init(elev=elev, azim=azim)
-        ax.set_title(name, fontsize=9)
-        ax.tick_params(labelsize=6)
+        _mm_axes_3d(ax, end_on)
+        ax.set_title(name if not end_on else f"{name} ({END_ON_WORDS[name]})", fontsize=9)
+    _legend(fig, points_name if P is not None and len(P) else None)
 
 
-def views_figure(estimate_mesh, truth_mesh, path, points=None, err=None, title: str = "") -> Path:
-    """Estimate (blue) vs truth (grey) meshes (trimesh, metres) from :data:`VIEWS`; PNG at ``path``.
-    ``points``: optional (m, 3) link points drawn in red."""
+def views_figure(estimate_mesh, truth_mesh, path, points=None, err=None, title: str = "",
+                 points_name: str = "contacts") -> Path:
+    """Estimate (blue) vs truth (grey, its outline black) meshes (trimesh, metres) from :data:`VIEWS`,
+    axes in mm, with a legend; PNG at ``path``.  ``points``: optional (m, 3) points drawn in red,
+    named ``points_name`` in the legend (:func:`points_label`)."""
     plt = _plt()
     fig = plt.figure(figsize=(10, 10))
-    _draw_mesh_views(fig, [(2, 2, i + 1) for i in range(4)], estimate_mesh, truth_mesh, points)
-    fig.suptitle((title or "estimate (blue) vs truth (grey)") + _err_title(err))
+    _draw_mesh_views(fig, [(2, 2, i + 1) for i in range(4)], estimate_mesh, truth_mesh, points, points_name)
+    fig.suptitle((title or "estimate vs truth") + _err_title(err))
     return _save(fig, path)
+
+
+#: The scene camera's vertical field of view, degrees, yaw and pitch, degrees (PyBullet's).
+SCENE_FOV_DEG = 40.0
+SCENE_YAW_DEG = 30.0
+SCENE_PITCH_DEG = -35.0
+#: The scene camera frames the object and the arm in its field of view narrowed this many times.
+SCENE_MARGIN = 1.1
+
+
+def scene_points(truth_mesh, spec, attempt) -> np.ndarray:
+    """(k, 3) world points, metres, the scene camera frames: the corners of the truth mesh's bounding
+    box and of the arm's base block, and the arm's joints and tip at ``attempt`` (padded by the
+    links' half-size)."""
+    T_base = np.asarray(attempt.T_world_base, dtype=float)
+    T = link_transforms(spec, np.asarray(attempt.q, dtype=float), T_base)
+    tip = T[-1] @ np.array([spec.link_length, 0.0, 0.0, 1.0])
+    arm = np.vstack([T[:, :3, 3], tip[:3]])
+    pad = 0.5 * max(spec.link_width, spec.link_height)
+    b = spec.base_size
+    block = _box_corners([-BASE_GAP_M - b, -b / 2, -b / 2], [-BASE_GAP_M, b / 2, b / 2])
+    block = block @ T_base[:3, :3].T + T_base[:3, 3]
+    return np.vstack([_box_corners(*truth_mesh.bounds), block, arm - pad, arm + pad])
+
+
+def _box_corners(lo, hi) -> np.ndarray:
+    """(8, 3) corners of the axis-aligned box [lo, hi]."""
+    return np.stack(np.meshgrid(*zip(lo, hi), indexing="ij"), axis=-1).reshape(-1, 3).astype(float)
+
+
+def scene_camera(truth_mesh, spec, attempt, width: int = 480, height: int = 360):
+    """PyBullet's (view, projection) matrices (16 floats each, column-major) of :func:`scene_image`:
+    from yaw :data:`SCENE_YAW_DEG` and pitch :data:`SCENE_PITCH_DEG`, at the nearest distance at
+    which every one of :func:`scene_points` is in view (the field of view narrowed by
+    :data:`SCENE_MARGIN`), centred on them: the object and the whole arm."""
+    import pybullet as p  # start-up: kept out of explore3d --help's
+
+    P = scene_points(truth_mesh, spec, attempt)
+    target = (P.min(axis=0) + P.max(axis=0)) / 2.0
+    ty = np.tan(np.radians(SCENE_FOV_DEG) / 2.0) / SCENE_MARGIN
+    tx = ty * width / height
+    for i in range(3):  # the distance that fits; twice the target moved to the middle of the view
+        V1 = np.reshape(p.computeViewMatrixFromYawPitchRoll(target.tolist(), 1.0, SCENE_YAW_DEG, SCENE_PITCH_DEG,
+                                                            0.0, 2), (4, 4), order="F")
+        C = P @ V1[:3, :3].T + V1[:3, 3]  # camera frame at distance 1 (OpenGL: looking along -z)
+        depth = -C[:, 2] - 1.0  # + the distance
+        dist = float(np.max(np.maximum(np.abs(C[:, 0]) / tx, np.abs(C[:, 1]) / ty) - depth))
+        dist = max(dist, float(np.max(-depth)) + 1e-2)  # every point in front of the camera
+        if i == 2:
+            break
+        u, v = C[:, 0] / (tx * (dist + depth)), C[:, 1] / (ty * (dist + depth))  # in [-1, 1]: in view
+        shift = np.array([(u.max() + u.min()) * tx, (v.max() + v.min()) * ty, 0.0]) * dist / 2.0
+        target = target + V1[:3, :3].T @ shift
+    view = p.computeViewMatrixFromYawPitchRoll(target.tolist(), dist, SCENE_YAW_DEG, SCENE_PITCH_DEG, 0.0, 2)
+    near, far = max(0.5 * float(np.min(dist + depth)), 1e-3), 2.0 * float(np.max(dist + depth))
+    proj = p.computeProjectionMatrixFOV(SCENE_FOV_DEG, width / height, near, far)
+    return view, proj
 
 
 def scene_image(truth_mesh, spec, attempt, width: int = 480, height: int = 360) -> np.ndarray:
     """(height, width, 3) uint8 RGB image from PyBullet's TinyRenderer (DIRECT client) of the truth
-    mesh (metres, world frame) and the arm ``spec`` at ``attempt.q`` (rad) on ``attempt.T_world_base``."""
+    mesh (metres, world frame) and the arm ``spec`` at ``attempt.q`` (rad) on ``attempt.T_world_base``,
+    through :func:`scene_camera`."""
     with quiet_c_output():  # PyBullet's banners: import, connect, the renderer
         return _scene_image(truth_mesh, spec, attempt, width, height)
 
@@ -182,11 +322,7 @@ def _scene_image(truth_mesh, spec, attempt, width: int, height: int) -> np.ndarr
                     if p.getJointInfo(arm, j, physicsClientId=cid)[2] == p.JOINT_REVOLUTE]
         for j, qj in zip(revolute, np.asarray(attempt.q, dtype=float)):
             p.resetJointState(arm, j, float(qj), physicsClientId=cid)
-        lo, hi = truth_mesh.bounds
-        target = ((lo + hi) / 2.0).tolist()
-        dist = 2.0 * float(np.linalg.norm(hi - lo)) + 0.05
-        view = p.computeViewMatrixFromYawPitchRoll(target, dist, 30.0, -35.0, 0.0, 2, physicsClientId=cid)
-        proj = p.computeProjectionMatrixFOV(40.0, width / height, 0.01, 10.0, physicsClientId=cid)
+        view, proj = scene_camera(truth_mesh, spec, attempt, width, height)
         img = p.getCameraImage(width, height, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=cid)
     finally:
         p.disconnect(cid)
@@ -195,13 +331,15 @@ def _scene_image(truth_mesh, spec, attempt, width: int, height: int) -> np.ndarr
 
 
 def overview_figure(path, numbers: dict, estimate_mesh=None, truth_mesh=None, points=None, scene=None,
-                    estimate_polygon=None, truth_polygon=None, title: str = "") -> Path:
-    """One-page overview PNG: views (3D meshes, or the 2D polygons), an optional rendered scene
-    ((h, w, 3) uint8) and a text panel of ``numbers`` (name -> value)."""
+                    estimate_polygon=None, truth_polygon=None, title: str = "", points_name: str = "contacts") -> Path:
+    """One-page overview PNG: views (3D meshes as in :func:`views_figure`, or the 2D polygons), an
+    optional rendered scene ((h, w, 3) uint8) and a text panel of ``numbers`` (name -> value).
+    ``points_name``: what ``points`` are, for the legend (:func:`points_label`)."""
     plt = _plt()
     fig = plt.figure(figsize=(12, 8))
     if estimate_mesh is not None:
-        _draw_mesh_views(fig, [(2, 3, 1), (2, 3, 2), (2, 3, 4), (2, 3, 5)], estimate_mesh, truth_mesh, points)
+        _draw_mesh_views(fig, [(2, 3, 1), (2, 3, 2), (2, 3, 4), (2, 3, 5)], estimate_mesh, truth_mesh, points,
+                         points_name)
     elif estimate_polygon is not None:
         ax = fig.add_subplot(1, 3, (1, 2))
         for ring in _rings(truth_polygon):
@@ -210,7 +348,7 @@ def overview_figure(path, numbers: dict, estimate_mesh=None, truth_mesh=None, po
             ax.plot(ring[:, 0], ring[:, 1], "-", color="crimson", lw=2, label="generated shape")
         if points is not None:
             P = np.asarray(points)
-            ax.plot(P[:, 0], P[:, 1], ".", ms=2, color="tab:blue", label="link points")
+            ax.plot(P[:, 0], P[:, 1], ".", ms=2, color="tab:blue", label=points_name)
         ax.set_aspect("equal")
         ax.legend(fontsize=8)
         ax.set_xlabel("x [m]")
@@ -291,9 +429,9 @@ def signed_distance_figure(estimate, truth, path, title: str = "", views=VIEWS[:
     3D (trimesh meshes, metres): the estimate is first :func:`subdivided` (a hull's large faces
     bridging a concavity have their vertices on the surface: only their interior is wrong), then
     each face takes the mean of its vertices' distances, drawn from ``views`` ((elevation, azimuth)
-    degrees) with the truth's outline (edges sharper than :data:`TRUTH_EDGE_ANGLE_DEG`) in grey.
-    Planar (shapely polygons): the estimate's boundary samples coloured, the truth's outline in
-    grey.  ``thumbnail``: one small view (the sweep report's table).  A symmetric diverging scale
+    degrees) with the truth's outline (edges sharper than :data:`TRUTH_EDGE_ANGLE_DEG`) in grey,
+    axes in mm as in :func:`views_figure`.  Planar (shapely polygons): the estimate's boundary
+    samples coloured, the truth's outline in grey.  ``thumbnail``: one small view (the sweep report's table).  A symmetric diverging scale
     (:data:`SD_CMAP`, +- :data:`SD_PERCENTILE` of |distance|) with a colorbar in mm."""
     from matplotlib.colors import Normalize  # start-up: matplotlib kept out of explore3d --help's
 
@@ -344,8 +482,7 @@ def signed_distance_figure(estimate, truth, path, title: str = "", views=VIEWS[:
             if thumbnail:
                 ax.set_axis_off()
             else:
-                ax.tick_params(labelsize=6)
-                ax.locator_params(nbins=4)
+                _mm_axes_3d(ax, END_ON.get(dict(zip(VIEWS, VIEW_NAMES)).get((elev, azim))))
             axes.append(ax)
     sm = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
     cb = fig.colorbar(sm, ax=axes, shrink=0.8, extend="both", pad=0.08 if not planar else 0.04)
@@ -373,6 +510,7 @@ def run_pictures(out, exploration, estimate, truth, mesh, err) -> list[str]:
                "wall s": exploration.wall_s, "sim s": exploration.sim_time_s, "arm": exploration.spec.name,
                "links": exploration.spec.n_links}
     names = []
+    what = points_label(exploration.config)
     scene = None
     last = next((w[-1] for w in exploration.attempts if len(w)), None)
     if last is not None:
@@ -384,12 +522,12 @@ def run_pictures(out, exploration, estimate, truth, mesh, err) -> list[str]:
         planar_figure(exploration, estimate, truth, out / "figure.png", err=err)
         names.append("figure.png")
         overview_figure(out / "overview.png", numbers, points=exploration.points, scene=scene,
-                        estimate_polygon=estimate, truth_polygon=truth)
+                        estimate_polygon=estimate, truth_polygon=truth, points_name=what)
     else:
-        views_figure(estimate, truth, out / "views.png", points=exploration.points, err=err)
+        views_figure(estimate, truth, out / "views.png", points=exploration.points, err=err, points_name=what)
         names.append("views.png")
         overview_figure(out / "overview.png", numbers, estimate_mesh=estimate, truth_mesh=truth,
-                        points=exploration.points, scene=scene)
+                        points=exploration.points, scene=scene, points_name=what)
     names.append("overview.png")
     signed_distance_figure(estimate, truth, out / "signed_distance.png", title=f"signed distance{_err_title(err)}")
     names.append("signed_distance.png")
