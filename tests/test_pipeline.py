@@ -111,6 +111,36 @@ def test_run_positional_call_progress_and_result():
     assert np.isfinite(res.error.percent) and 0 < res.error.iou <= 1
 
 
+def test_takes_phase():
+    from explore3d.strategy.explore import takes_phase
+
+    assert not takes_phase(lambda done, total: None)
+    assert takes_phase(lambda done, total, phase: None)
+    assert takes_phase(lambda done, total, phase="wraps": None)
+    assert takes_phase(lambda *args: None)
+
+
+def test_progress_with_a_phase_names_the_planned_wraps_then_each_probe_round():
+    """A three-argument progress hears each phase as it starts (with its new total) and after each
+    wrap: the planned wraps, then each round of probes, the total growing by the round's wraps (a
+    two-argument one hears only the calls after each wrap: test_run_positional_call_progress_and_result)."""
+    from explore3d.strategy.explore import ProbeConfig
+
+    probes = ProbeConfig(rounds=2, targets=2, orientations=1, across=False, fingers=0, min_change=0.0)
+    config = ExploreConfig(directions=6, offsets=1, angles=1, attempts=1, jobs=1, probes=probes)
+    calls = []
+    res = run(load_object("cube"), "default", config, progress=lambda d, t, phase: calls.append((d, t, phase)))
+    ex = res.exploration
+    sizes = [r["wraps"] for r in ex.probe_rounds]
+    assert sizes and ex.n_wraps == 6 + sum(sizes)
+    expected, done = [], 0
+    for phase, n in [("planned wraps", 6)] + [(f"probe round {k + 1} of at most 2", n) for k, n in enumerate(sizes)]:
+        total = done + n
+        expected += [(done + i, total, phase) for i in range(n + 1)]  # as it starts, then after each wrap
+        done = total
+    assert calls == expected
+
+
 def test_within_bound():
     P = np.array([[0.0, 0.0], [0.1, 0.0], [0.2, 0.0]])
     np.testing.assert_array_equal(within_bound(P, (0.05, 0.0, 9.0), 0.05), [True, True, False])

@@ -50,8 +50,10 @@ SHORTER = {
 }
 
 #: The small run of the cube standing in for README's main command (``runs/cube``), for the
-#: commands that read its files: 8 wraps, no probes, one process, no pictures (about 20 s).
-SMALL_RUN = ["--directions", "8", "--angles", "1", "--probes", "0", "--jobs", "1", "--no-pictures", "-q"]
+#: commands that read its files: 8 wraps, no probes, one process, no pictures (about 20 s),
+#: recorded into ``runs/cube/rec`` for ``reconstruct --log``.
+SMALL_RUN = ["--directions", "8", "--angles", "1", "--probes", "0", "--jobs", "1", "--no-pictures", "-q",
+             "--record", "runs/cube/rec"]
 
 #: README command lines run as written (beginning of the line -> why it is cheap); also every
 #: line ending in ``--help`` (the parser only).

@@ -130,6 +130,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "vertex distance from the centre); contact points beyond it are dropped")
     r.add_argument("--no-pictures", dest="no_pictures", action="store_true", default=None,
                    help="skip the PNG pictures (faster)")
+    r.add_argument("--rerun", metavar="FILE.rrd",
+                   help="also write a 3D recording of the run for the rerun viewer (the arm's links, detections, "
+                        "contacts, swept free space and the estimate after each round, on a timeline per wrap, and "
+                        "the truth); open it with 'rerun FILE.rrd' (needs: pip install -e \".[viz]\")")
     q_ = r.add_mutually_exclusive_group()
     q_.add_argument("--quality", dest="quality", action="store_true", default=None,
                     help="also compute the contact-quality figures (evaluation only, after the run, against the "
@@ -141,6 +145,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="3d: after the run, plan N grasps on each of the estimate, the truth, the estimate's convex "
                         "hull and an early estimate and execute them on the truth, as 'explore3d grasp' does "
                         "(evaluation only; default 0: none); the rates go into report.json's grasp entry")
+    r.add_argument("--record", metavar="DIR",
+                   help="keep the robot's logs (every command and joint reading) and write them into DIR with the "
+                        "arm, the contact band and the rough bound: 'explore3d reconstruct --log DIR' rebuilds the "
+                        "estimate from them alone (docs/robot-interface.md)")
     r.add_argument("--sensing", type=RUN_OPTIONS["sensing"],
                    help="what the servos report: default (4096-count encoders, 1 mN m torque resolution and noise, "
                         "one step of delay) or ideal (exact, no delay)")
@@ -184,11 +192,18 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
     r.set_defaults(func=cmd_run)
 
-    c = sub.add_parser("reconstruct", help="inverse convex hull of a point file",
+    c = sub.add_parser("reconstruct", help="inverse convex hull of a point file, or a run rebuilt from its logs",
                        description="Reconstruct a shape from POINTS (PLY/XYZ, metres) by the inverse convex hull. "
                                    "3D points give a mesh (format from the --out suffix); points with z = 0 "
                                    "(planar runs) give a polygon: --out X.json, or a mesh extruded by --height.")
-    c.add_argument("points", help="point file (PLY, XYZ, or anything trimesh loads)")
+    c.add_argument("points", nargs="?", default=None, help="point file (PLY, XYZ, or anything trimesh loads)")
+    c.add_argument("--log", metavar="DIR", default=None,
+                   help="instead of POINTS: the folder 'explore3d run ... --record DIR' wrote; the run's estimate is "
+                        "rebuilt from its robot logs alone (the controller replayed, the contacts localised, the free "
+                        "space swept and the hull built as the run did)")
+    c.add_argument("--bag", metavar="DIR", default=None,
+                   help="instead of POINTS: the ROS 2 bag of a recording (DIR/bag of 'explore3d run ... --record "
+                        "DIR'; sqlite3 or MCAP, read with rosbags); the run's estimate is rebuilt from it as --log does")
     c.add_argument("--out", required=True, help="output mesh (.obj .stl .ply .off .glb) or polygon .json")
     c.add_argument("--a", type=RUN_OPTIONS["a"], default=DEFAULT_A, help=f"coarseness in (0, {MAX_A:g}] (default {DEFAULT_A}, as run)")
     c.add_argument("--method", type=RUN_OPTIONS["method"], default="exponential")
@@ -386,6 +401,14 @@ def cmd_run(args) -> int:
     if (opts.get("calibrate") or opts.get("face_offset")) and config.points != "links":
         raise UsageError("--calibrate and --face-offset correct the paper's link points; the localised contacts (the "
                          "default) lie on the links' surfaces already: add --points links, or drop them")
+    if opts.get("record"):
+        record_dir = Path(opts["record"])
+        if record_dir.exists() and not record_dir.is_dir():
+            raise UsageError(f"--record {record_dir} is a file; give a folder for the recording")
+        if record_dir.resolve() == out.resolve():
+            raise UsageError(f"--record {record_dir} is the --out folder; give the recording a folder of its own "
+                             f"(e.g. {out / 'recording'})")
+        config = dataclasses.replace(config, record=True)
     if opts.get("grasp") and config.mode != "3d":
         raise UsageError(f"--grasp plans grasps on a 3D estimate; this run is --mode {config.mode}: drop --grasp or "
                          "run --mode 3d")
@@ -402,6 +425,16 @@ def cmd_run(args) -> int:
                                   height=opts.get("height"))
         except ValueError as exc:
             raise UsageError(str(exc)) from None
+        if opts.get("rerun"):  # the file and the optional extra checked before any simulation
+            from explore3d.app.rerun_view import check_recording_path, require_rerun  # start-up: as above
+
+            try:
+                check_recording_path(opts["rerun"], out)
+                require_rerun()
+            except ValueError as exc:
+                raise UsageError(str(exc)) from None
+            except FileNotFoundError as exc:
+                raise RunError(str(exc)) from None
         _prepare_out_dir(out)
 
         import numpy as np  # start-up: kept out of explore3d --help's
@@ -419,12 +452,15 @@ def cmd_run(args) -> int:
 
             bar = tqdm(total=None, desc="wraps", unit="wrap", file=STDERR, leave=False)
 
-        def progress(done, total):
+        def progress(done, total, phase="wraps"):
+            """The bar shows the phase running (planned wraps, top search, probe round k of at most n):
+            its total grows as the top search and the probes add wraps."""
             if bar is not None:
+                bar.set_description(phase, refresh=False)
                 bar.total = total
                 bar.n = done
                 bar.refresh()
-            log.info("wrap %d/%d done", done, total)
+            log.info("%s: %d/%d wraps done", phase, done, total)
 
         try:
             res, report = run_and_report(
@@ -441,17 +477,35 @@ def cmd_run(args) -> int:
         finally:
             if bar is not None:
                 bar.close()
+        if opts.get("record"):
+            from explore3d.app.offline import recording_dict, write_recording  # start-up: kept out of --help's
+            from explore3d.app.rosbag import write_bag  # start-up: kept out of --help's
+
+            write_recording(res.exploration, opts["record"], res.centre, res.radius, opts["a"], opts["method"])
+            write_bag(recording_dict(res.exploration, res.centre, res.radius, opts["a"], opts["method"]),
+                      res.exploration.logs, Path(opts["record"]) / "bag")
         if opts.get("grasp"):
             from explore3d.app.grasp import GraspConfig, grasp_run  # start-up: kept out of --help's
 
             grasp = grasp_run(out, GraspConfig(n=opts["grasp"]), pictures=not opts.get("no_pictures", False),
                               truth=mesh)
+        if opts.get("rerun"):
+            from explore3d.app.rerun_view import write_rerun  # start-up: kept out of --help's
+
+            try:
+                write_rerun(opts["rerun"], res, mesh if res.setup is None else res.truth, a=opts["a"],
+                            method=opts["method"])
+            except OSError as exc:
+                raise RunError(f"cannot write the rerun recording {opts['rerun']} ({exc.strerror or exc}); the run's "
+                               f"files are in {out}") from None
     ex, err = res.exploration, res.error
     if not args.quiet:
         print(f"{opts['object']}: {err.percent:.2f} % error, IoU {err.iou:.3f}, {ex.n_wraps} wraps, "
               f"{len(ex.points)} points, {ex.wall_s:.1f} s -> {out}")
         if opts.get("grasp"):
             print(_grasp_line(grasp))
+        if opts.get("rerun"):
+            print(f"3D recording: {opts['rerun']} (open it with: rerun {opts['rerun']})")
     return 0
 
 
@@ -465,6 +519,59 @@ def _grasp_line(entry: dict) -> str:
 
 
 # --- other commands ------------------------------------------------------------------------------
+
+def _reconstruct_log(args, out: Path, suffix: str) -> int:
+    """``reconstruct --log DIR`` or ``--bag DIR``: the recorded run's estimate from its logs alone
+    (:func:`explore3d.app.offline.reconstruct_recording`)."""
+    given = [flag for flag, v in (("POINTS", args.points), ("--free-space", args.free_space),
+                                  ("--radius", args.radius)) if v is not None]
+    if given or args.estimator != "inverse-hull" or args.centre != "midrange":
+        raise UsageError(f"--log and --bag rebuild the run as it was (its rough bound, free space and inverse hull): drop "
+                         f"{', '.join(given) or '--centre/--estimator'}")
+    with quiet_c_output():
+        from explore3d.app.export import write_mesh  # start-up: kept out of explore3d --help's
+        from explore3d.app.offline import read_recording, reconstruct_recording  # start-up: as above
+        from explore3d.app.pipeline import ReconstructionError  # start-up: as above
+        from explore3d.robot.interface import LogMismatchError  # start-up: as above
+
+        flag, source = ("--log", args.log) if args.log is not None else ("--bag", args.bag)
+        try:
+            if args.log is not None:
+                rec = read_recording(args.log)
+            else:
+                from explore3d.app.rosbag import read_bag  # start-up: kept out of explore3d --help's
+
+                rec = read_bag(args.bag)
+        except ValueError as exc:
+            raise RunError(f"{flag}: {exc}") from None
+        try:
+            ex, est = reconstruct_recording(rec)
+        except ReconstructionError as exc:
+            raise RunError(f"reconstruction failed: {exc}") from None
+        except LogMismatchError as exc:
+            raise RunError(f"{flag} {source} does not replay ({exc}): its logs were not recorded by this explore3d "
+                           "with the recording's settings") from None
+    if rec.config.mode == "planar":
+        if suffix == "json":
+            atomic_write_text(out, _dump([[float(x), float(y)] for x, y in list(est.exterior.coords)[:-1]]))
+        else:  # extruded as run extrudes it: over the arm's sensed height band, or --height about its plane
+            import trimesh  # start-up: kept out of explore3d --help's
+
+            from explore3d.app.pipeline import extrusion_band  # start-up: kept out of explore3d --help's
+
+            zlo, zhi = extrusion_band(ex, args.height)
+            m = trimesh.creation.extrude_polygon(est, zhi - zlo)
+            m.apply_translation([0.0, 0.0, zlo])
+            write_mesh(m, out, suffix)
+        size = f"area {est.area:.6g} m^2"
+    else:
+        if suffix == "json":
+            raise UsageError("the recording is of a 3D run: --out must be a mesh file (.obj .stl .ply .off .glb)")
+        write_mesh(est, out, suffix)
+        size = f"volume {est.volume:.6g} m^3"
+    print(f"{ex.n_wraps} wraps replayed from {source}, {len(ex.points)} points, {size} -> {out}")
+    return 0
+
 
 def cmd_reconstruct(args) -> int:
     """The hull input is built as ``run`` builds it (:func:`explore3d.reconstruction.hull_input.hull_input_mask`:
@@ -487,6 +594,12 @@ def cmd_reconstruct(args) -> int:
             check_format(suffix)
         except ValueError as exc:
             raise UsageError(f"--out {out}: {exc} (or .json for a 2D polygon)") from None
+    if args.log is not None and args.bag is not None:
+        raise UsageError("--log and --bag are two forms of one recording: give one")
+    if args.log is not None or args.bag is not None:
+        return _reconstruct_log(args, out, suffix)
+    if args.points is None:
+        raise UsageError("reconstruct needs a point file (POINTS) or a run's recording (--log DIR or --bag DIR)")
     centre = args.centre
     if args.radius is not None and not isinstance(centre, tuple):
         raise UsageError("--radius needs an explicit --centre x,y[,z] (the rough centre it is measured from, metres)")

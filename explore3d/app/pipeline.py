@@ -279,6 +279,42 @@ def check_run_inputs(mesh, spec, config, a, method, centre, radius) -> None:
                          "finer arm (--arm)")
 
 
+def estimate_exploration(ex: Exploration, centre, radius: float, a: float = DEFAULT_A, method: str = "exponential"):
+    """What :func:`run` makes of an exploration, with no world: the wraps carried back onto the
+    object when it moved (``config.scene.register_moved``), the inverse hull of the contacts
+    about the rough ``centre`` (world frame, m) within ``radius`` (m), carved by the swept free
+    space (3D), cut at the table the robot was told of.
+
+    Returns ``(exploration, hull, carved, cut, estimate)``: the exploration (carried back), the
+    :class:`~explore3d.geometry.hull.Hull`, the carving (None when not carved), the cut (None
+    without a table) and the estimate (trimesh 3D, shapely Polygon planar).
+
+    Raises:
+        ReconstructionError: the contact points gave no hull."""
+    config = ex.config
+    if config.scene.register_moved:
+        ex = carry_back(ex, centre, radius, a=a)
+    try:
+        hull = reconstruct_exploration(ex, centre, radius, a=a, method=method)
+    except ValueError as exc:
+        what = str(exc).split("; ")[0]  # inverse_hull's own fix hints are about its arguments, not the run
+        n_used = int(hull_input_mask(ex.points, ex.point_wrap, centre, radius).sum())
+        raise ReconstructionError(
+            f"no shape from the {n_used} {'localised contacts' if config.points == 'contacts' else 'link points'} "
+            f"within {radius:.3g} m of the rough centre ({what}); "
+            "explore from more directions or with more attempts (ExploreConfig directions/attempts, --directions/"
+            "--attempts) so the arm surrounds the object, or correct the rough centre/radius", exploration=ex,
+        ) from None
+    carved = None
+    if config.mode == "3d" and config.free_space:
+        carved = carve(hull.mesh, ex.swept)
+    est = hull.shape() if carved is None else carved.mesh
+    cut = None
+    if ex.table_z is not None:
+        cut = est = cut_at_table(est, ex.table_z)
+    return ex, hull, carved, cut, est
+
+
 def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float = DEFAULT_A,
         method: str = "exponential", progress=None, *, centre=None, radius=None, seed: int = 0,
         setup=None, after_wrap=None) -> Result:
@@ -319,27 +355,8 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
             "or a correct rough bound (centre=/radius=, --centre/--radius)",
             exploration=ex,
         )
-    if config.scene.register_moved:
-        ex = carry_back(ex, centre, radius, a=a)
-    try:
-        hull = reconstruct_exploration(ex, centre, radius, a=a, method=method)
-    except ValueError as exc:
-        what = str(exc).split("; ")[0]  # inverse_hull's own fix hints are about its arguments, not the run
-        n_used = int(hull_input_mask(ex.points, ex.point_wrap, centre, radius).sum())
-        raise ReconstructionError(
-            f"no shape from the {n_used} {'localised contacts' if config.points == 'contacts' else 'link points'} "
-            f"within {radius:.3g} m of the rough centre ({what}); "
-            "explore from more directions or with more attempts (ExploreConfig directions/attempts, --directions/"
-            "--attempts) so the arm surrounds the object, or correct the rough centre/radius", exploration=ex,
-        ) from None
+    ex, hull, carved, cut, est = estimate_exploration(ex, centre, radius, a, method)
     truth = planar_truth(mesh, float(centre[2])) if config.mode == "planar" else truth
-    carved = None
-    if config.mode == "3d" and config.free_space:
-        carved = carve(hull.mesh, ex.swept)
-    est = hull.shape() if carved is None else carved.mesh
-    cut = None
-    if ex.table_z is not None:
-        cut = est = cut_at_table(est, ex.table_z)
     return Result(exploration=ex, hull=hull, truth=truth, error=shape_error(est, truth, seed=seed),
                   centre=centre, radius=radius, n_points_used=len(hull.points), carved=carved, cut=cut,
                   setup=setup)  # the hull's input

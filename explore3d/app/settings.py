@@ -186,9 +186,15 @@ RUN_OPTIONS = {
     # evaluation after the run: this many grasps planned on each of the estimate, the truth, the estimate's
     # convex hull and an early estimate, executed on the truth (explore3d.app.grasp; 0: none)
     "grasp": _int_min("--grasp", 0),
+    # keep the robot's logs and write them, with what an offline reconstruction needs, into this folder
+    # (explore3d.app.offline; explore3d reconstruct --log DIR rebuilds the estimate from them)
+    "record": str,
     # outputs
     "density": _positive("--density"),
     "height": _positive("--height"),
+    # a 3D recording of the run for the rerun viewer, FILE.rrd (explore3d.app.rerun_view; the viz extra); not a
+    # sweep key
+    "rerun": str,
 }
 
 

@@ -2,6 +2,8 @@
 naming the expected and the actual."""
 from __future__ import annotations
 
+import dataclasses
+import typing
 from pathlib import Path
 
 import numpy as np
@@ -96,3 +98,29 @@ def read_toml(path, what: str, flag: str) -> dict:
         raise ValueError(f"cannot read {what} {path}: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{what} {path} is not valid TOML ({exc}); fix the syntax") from None
+
+
+def dataclass_from_dict(cls, data: dict):
+    """Rebuild a (frozen, possibly nested) dataclass ``cls`` from :func:`dataclasses.asdict`-style
+    ``data`` (JSON-ready: lists for tuples, dicts for nested dataclasses, None for absent optional
+    ones); fields ``data`` lacks keep their defaults.  The inverse of ``to_dict`` for the
+    configurations; ValueError naming an unknown key or the class that refuses a value."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{cls.__name__} needs a dict of its fields; got {type(data).__name__}")
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise ValueError(f"{cls.__name__} has no field(s) {unknown}; known: {sorted(fields)}")
+    hints = typing.get_type_hints(cls)
+    kw = {}
+    for name, value in data.items():
+        kinds = [t for t in (typing.get_args(hints[name]) or (hints[name],)) if dataclasses.is_dataclass(t)]
+        if kinds and isinstance(value, dict):
+            value = dataclass_from_dict(kinds[0], value)
+        elif isinstance(value, list):
+            value = tuple(value)
+        kw[name] = value
+    try:
+        return cls(**kw)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{cls.__name__}: {exc}") from None

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import inspect
 import logging
 import multiprocessing as mp
 import os
@@ -28,7 +29,7 @@ from explore3d.arm.workspace import pose_clears
 from explore3d.core.defaults import DEFAULT_A
 from explore3d.core.interrupt import check_interrupt, init_pool_worker, sigint_blocked
 from explore3d.core.settings import SceneConfig, SimConfig
-from explore3d.core.validate import check_field
+from explore3d.core.validate import check_field, dataclass_from_dict
 from explore3d.feeling.contacts import ContactSet, contacts_for_hull, localise_attempts
 from explore3d.feeling.detect import ContactBand
 from explore3d.geometry.directions import (
@@ -204,6 +205,11 @@ class ExploreConfig:
         d = asdict(self)
         d["faces"] = list(self.faces)
         return d
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "ExploreConfig":
+        """The configuration :meth:`to_dict` (or report.json's ``config.explore``) describes."""
+        return dataclass_from_dict(cls, data)
 
     def floor_z(self, table_z: float | None) -> float | None:
         """The plane, world z, m, the arm's plan stays above: the table plus the scene's clearance."""
@@ -594,6 +600,16 @@ def _top_search(spec, config, centre, radius, table_z, poses, results, run_poses
     return n
 
 
+def takes_phase(progress) -> bool:
+    """Whether the callable ``progress`` takes a third positional argument, the phase of the
+    exploration (``progress(done, total, phase)``); a ``progress(done, total)`` is called with two."""
+    try:
+        inspect.signature(progress).bind(0, 0, "")
+    except (TypeError, ValueError):  # ValueError: no signature to read
+        return False
+    return True
+
+
 def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: ContactBand, centre, radius: float,
                    progress=None, *, table_z: float | None = None, persistent: bool = False, after_wrap=None,
                    band_s: float = 0.0) -> Exploration:
@@ -606,7 +622,11 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
         band: the contact detector's band of this arm and setting
             (:func:`explore3d.world.band.cached_band`, or a real arm's own calibration).
         centre, radius: the rough location (3,) and bounding radius (m) the robot is told.
-        progress: None, or a callable ``progress(done, total)`` called after each wrap.
+        progress: None, or a callable ``progress(done, total)`` called after each wrap (``total``
+            grows as the top search and the rounds of probes add wraps).  One that takes a third
+            argument (:func:`takes_phase`) is called ``progress(done, total, phase)``, also as
+            each phase starts, with ``phase`` "planned wraps", "top search" or "probe round k of
+            at most n".
         table_z: the table top's height, world z, m, the robot is told (None: no table).
         persistent: the wraps run in sequence in one workcell (the object stays where a wrap left
             it; ``config.jobs`` then does not apply).
@@ -629,6 +649,15 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
     redone: list[bool] = []
     segments: list[list] = []  # per wrap, its contact segments (persistent worlds: the motion flag)
     runner = _PersistentRunner(workcells, after_wrap) if persistent else _WrapRunner(workcells, jobs, after_wrap)
+    phased = progress is not None and takes_phase(progress)
+    phase, probe_round = "planned wraps", 0
+
+    def report():
+        if phased:
+            progress(len(results), len(poses), phase)
+        elif progress:
+            progress(len(results), len(poses))
+
     def task(i, p):
         return (i, p.T_world_base, band, config, (centre, radius), floor_z)
 
@@ -637,6 +666,8 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
         def run_poses(new_poses):
             """Run ``new_poses`` (already the last entries of ``poses``); in a persistent world one
             at a time, repeating once a wrap after which the object seems to have moved."""
+            if phased:
+                report()  # the phase and its new total, before its first wrap ends
             if not persistent:
                 first = len(results)
                 for r in runner.map([task(first + j, p) for j, p in enumerate(new_poses)]):
@@ -644,8 +675,7 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
                     results.append(r)
                     moved.append(False)
                     redone.append(False)
-                    if progress:
-                        progress(len(results), len(poses))
+                    report()
                 return
             for p in list(new_poses):
                 redo = False
@@ -655,19 +685,25 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
                     check_interrupt()
                     moved.append(_moved(spec, results, segments, config, centre, radius))
                     redone.append(redo)
-                    if progress:
-                        progress(len(results), len(poses))
+                    report()
                     if not moved[-1] or redo or not config.scene.redo_moved:
                         break
                     poses.insert(i + 1, p)  # the same wrap again, where the object is now
                     redo = True
 
+        def run_probes(new_poses):
+            nonlocal phase, probe_round
+            probe_round += 1
+            phase = f"probe round {probe_round} of at most {config.probes.rounds}"
+            run_poses(new_poses)
+
         run_poses(poses)
         if floor_z is not None and config.table_top_tol_m is not None and config.mode == "3d":
+            phase = "top search"
             _top_search(spec, config, centre, radius, table_z, poses, results, run_poses,
                         lambda T: pose_clears(spec, T, floor_z))
         if probing:
-            rounds = _probe_rounds(spec, config, centre, radius, poses, results, run_poses,
+            rounds = _probe_rounds(spec, config, centre, radius, poses, results, run_probes,
                                    keep=None if floor_z is None else (lambda T: pose_clears(spec, T, floor_z)))
     attempts = tuple(tuple(r[0]) for r in results)
     steps = int(sum(r[1] for r in results))

@@ -1,0 +1,148 @@
+"""A run's recording (``explore3d run --record DIR``) and its estimate rebuilt offline from the
+robot logs alone (``explore3d reconstruct --log DIR``, :mod:`explore3d.app.offline`; issue 26)."""
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+SMALL_RUN = ["--directions", "8", "--offsets", "1", "--angles", "1", "--attempts", "1", "--probes", "0",
+             "--no-pictures", "-q", "--jobs", "1"]
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A small 3D run of the cube with its recording."""
+    from explore3d import ArmSpec, write_arm_urdf
+    from explore3d.app.cli import main
+
+    d = tmp_path_factory.mktemp("offline")
+    arm = write_arm_urdf(ArmSpec(name="small16", n_links=16, link_length=0.02), d / "small16.urdf")
+    assert main(["run", "cube", "--out", str(d / "run"), "--arm", str(arm), *SMALL_RUN,
+                 "--record", str(d / "rec")]) == 0
+    return d
+
+
+def test_the_estimate_rebuilt_from_the_logs_is_the_runs(recorded, capsys):
+    """Same logs, same arithmetic: the offline estimate is the run's, vertex for vertex."""
+    from explore3d.app.cli import main
+
+    d = recorded
+    capsys.readouterr()
+    assert main(["reconstruct", "--log", str(d / "rec"), "--out", str(d / "offline.obj")]) == 0
+    assert "wraps replayed" in capsys.readouterr().out
+    run = trimesh.load_mesh(d / "run" / "estimate.obj")
+    off = trimesh.load_mesh(d / "offline.obj")
+    assert len(run.vertices) == len(off.vertices) > 0
+    assert np.array_equal(np.asarray(run.vertices), np.asarray(off.vertices))
+    assert np.array_equal(np.asarray(run.faces), np.asarray(off.faces))
+
+
+def test_recording_round_trip(recorded):
+    """recording.json and the wrap logs give back the run's arm, settings, band and rough bound."""
+    from explore3d.app.offline import read_recording
+
+    d = recorded
+    rec = read_recording(d / "rec")
+    report = json.loads((d / "run" / "report.json").read_text())
+    assert rec.spec.to_dict() == report["config"]["arm"]
+    assert json.loads(json.dumps(rec.config.to_dict())) == {**report["config"]["explore"], "record": True}
+    assert rec.band.to_dict()["swept_rad"] == report["contact_band"]["swept_rad"]
+    assert rec.centre.tolist() == report["config"]["centre_m"] and rec.radius == report["config"]["radius_m"]
+    assert len(rec.logs) == report["n_wraps"] == 8
+    assert all(log.n_steps > 0 and np.isfinite(log.tau).all() for log in rec.logs)
+
+
+def test_a_tampered_log_is_refused_in_one_line(recorded, tmp_path, capsys):
+    """A log whose commands are not what this controller asks (another controller's) does not
+    replay: one line, exit 1; a folder without a recording likewise."""
+    import shutil
+
+    from explore3d.app.cli import main
+    from explore3d.robot.interface import RobotLog
+
+    rec = tmp_path / "rec"
+    shutil.copytree(recorded / "rec", rec)
+    log = RobotLog.load(rec / "wrap_0003.npz")
+    log.q_ref[5] += 1e-3  # one reference of one step
+    log.save(rec / "wrap_0003.npz")
+    capsys.readouterr()
+    assert main(["reconstruct", "--log", str(rec), "--out", str(tmp_path / "e.obj")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "does not replay" in err[0] and "q_ref" in err[0]
+    assert not (tmp_path / "e.obj").exists()
+    assert main(["reconstruct", "--log", str(tmp_path), "--out", str(tmp_path / "e.obj")]) == 1
+    assert "holds no recording.json" in capsys.readouterr().err
+
+
+def test_explore_config_round_trips_through_json():
+    from explore3d.strategy.encircle import CurlBack
+    from explore3d.strategy.explore import ExploreConfig
+    from explore3d.world.scene import scene_explore_config
+
+    for cfg in (ExploreConfig(), ExploreConfig(mode="planar", probes=None, curl_back=CurlBack()),
+                scene_explore_config("table")):
+        assert ExploreConfig.from_dict(json.loads(json.dumps(cfg.to_dict()))) == cfg
+    with pytest.raises(ValueError, match="no field"):
+        ExploreConfig.from_dict({"wraps": 3})
+
+
+def test_the_ros2_bag_gives_the_runs_estimate(recorded, capsys):
+    """The recording's ROS 2 bag (DIR/bag, written with rosbags) holds the .npz logs' numbers
+    exactly, so ``reconstruct --bag`` gives the run's estimate vertex for vertex."""
+    from explore3d.app.cli import main
+    from explore3d.app.offline import read_recording
+    from explore3d.app.rosbag import TOPICS, read_bag
+
+    d = recorded
+    from_bag, from_npz = read_bag(d / "rec" / "bag"), read_recording(d / "rec")
+    for a, b in zip(from_bag.logs, from_npz.logs, strict=True):
+        for k in ("base_T", "start_q", "start_index", "t_s", "q", "dq", "tau", "q_ref", "dq_ref", "torque_limit",
+                  "tau_ff"):
+            assert np.array_equal(getattr(a, k), getattr(b, k)), k
+    from rosbags.rosbag2 import Reader
+
+    with Reader(d / "rec" / "bag") as r:  # what a ROS user sees
+        assert {c.topic: c.msgtype for c in r.connections} == TOPICS
+        steps = sum(log.n_steps for log in from_npz.logs)
+        assert r.topics["/joint_states"].msgcount == steps
+    capsys.readouterr()
+    assert main(["reconstruct", "--bag", str(d / "rec" / "bag"), "--out", str(d / "bag.obj")]) == 0
+    run, off = trimesh.load_mesh(d / "run" / "estimate.obj"), trimesh.load_mesh(d / "bag.obj")
+    assert np.array_equal(np.asarray(run.vertices), np.asarray(off.vertices))
+
+
+def _rewrite_bag(src, dst, change):
+    """Copy the bag ``src`` to ``dst`` with ``change(topic, msg)`` applied to every message."""
+    from rosbags.rosbag2 import Reader, Writer
+
+    from explore3d.app.rosbag import _TYPESTORE, TOPICS
+
+    with Reader(src) as r, Writer(dst, version=8) as w:
+        conns = {c.topic: w.add_connection(c.topic, c.msgtype, typestore=_TYPESTORE) for c in r.connections
+                 if change(c.topic, None) is not False}
+        for c, ns, raw in r.messages():
+            if c.topic not in conns:
+                continue
+            msg = _TYPESTORE.deserialize_cdr(raw, c.msgtype)
+            msg = change(c.topic, msg) or msg
+            w.write(conns[c.topic], ns, _TYPESTORE.serialize_cdr(msg, TOPICS[c.topic]))
+
+
+@pytest.mark.parametrize("what,change,words", [
+    ("missing topic", lambda t, m: False if t == "/explore3d/torque_limit" else None, "lacks the topic"),
+    ("other joint names", lambda t, m: (setattr(m, "name", [f"j{i}" for i in range(len(m.name))])
+                                        if m is not None and t == "/joint_states" else None), "not of this arm"),
+    ("NaN reading", lambda t, m: (setattr(m, "effort", np.where(np.arange(len(m.effort)) == 0, np.nan, m.effort))
+                                  if m is not None and t == "/joint_states" else None), "NaN"),
+])
+def test_bad_bags_are_refused_in_one_line(recorded, tmp_path, capsys, what, change, words):
+    from explore3d.app.cli import main
+
+    bad = tmp_path / "bad"
+    _rewrite_bag(recorded / "rec" / "bag", bad, change)
+    capsys.readouterr()
+    assert main(["reconstruct", "--bag", str(bad), "--out", str(tmp_path / "e.obj")]) == 1, what
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0], err
+    assert not (tmp_path / "e.obj").exists()
