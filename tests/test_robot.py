@@ -355,3 +355,48 @@ def test_factory_band_is_what_the_calibration_measures(monkeypatch, tmp_path):
     cached_band.cache_clear()
     assert "data/band-" in shipped.provenance["cache"]
     assert np.array_equal(shipped.swept, fresh.swept) and np.array_equal(shipped.other, fresh.other)
+
+
+# --- an arm read from any URDF (issue 26) -------------------------------------------------------------
+
+def _plain_urdf(spec):
+    """explore3d's URDF of ``spec`` without the embedded spec comment: what another tool would write."""
+    import re
+
+    from explore3d.arm.urdf import arm_urdf
+
+    return re.sub(r"<!-- explore3d-arm-spec:.*?-->", "", arm_urdf(spec))
+
+
+def test_an_arm_is_read_from_its_joints_and_links(tmp_path):
+    """A URDF without explore3d's comment gives the same ArmSpec from its joints and links
+    (to the URDF's printed precision), through load_arm as through the file."""
+    from explore3d.arm.spec import DEFAULT_ARM, PAPER_ARM, ArmSpec
+    from explore3d.arm.urdf import load_arm
+
+    for spec in (DEFAULT_ARM, PAPER_ARM, ArmSpec(name="small16", n_links=16, link_length=0.02, link_mass=0.02)):
+        path = tmp_path / f"{spec.name}.urdf"
+        path.write_text(_plain_urdf(spec))
+        got = load_arm(str(path))
+        for k, v in spec.to_dict().items():
+            assert getattr(got, k) == (v if isinstance(v, (str, int)) else pytest.approx(v, rel=1e-5)), k
+
+
+@pytest.mark.parametrize("edit,words", [
+    (lambda t: t.replace('<joint name="joint3" type="revolute">', '<joint name="joint3" type="prismatic">'),
+     "joint 'joint3' is 'prismatic'"),
+    (lambda t: t.replace('<axis xyz="0 0 1"/>', '<axis xyz="0 1 0"/>', 1), "turns about"),
+    (lambda t: t.replace('<parent link="link4"/>', '<parent link="link2"/>'), "more than one child joint"),
+    (lambda t: t.replace('<box size="0.02 0.008 0.01"/></geometry></collision>',
+                         '<box size="0.02 0.012 0.01"/></geometry></collision>', 1), "box sizes differ"),
+    (lambda t: "<robot><link", "not valid XML"),
+])
+def test_a_urdf_arm_spec_cannot_hold_is_refused(tmp_path, edit, words):
+    from explore3d.arm.spec import DEFAULT_ARM
+    from explore3d.arm.urdf import load_arm
+
+    path = tmp_path / "arm.urdf"
+    path.write_text(edit(_plain_urdf(DEFAULT_ARM)))
+    with pytest.raises(ValueError, match=words.replace("(", r"\(").replace(")", r"\)")) as exc:
+        load_arm(str(path))
+    assert "\n" not in str(exc.value)

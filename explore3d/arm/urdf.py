@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import re
+from dataclasses import replace
 from pathlib import Path
 
 from explore3d.arm.spec import BASE_GAP_M, BUILTIN_ARMS, ArmSpec
@@ -75,13 +76,11 @@ def write_arm_urdf(spec: ArmSpec, path) -> Path:
 
 
 def spec_from_urdf_text(text: str, source: str = "URDF") -> ArmSpec:
-    """Read back the :class:`ArmSpec` embedded by :func:`arm_urdf`."""
+    """The :class:`ArmSpec` of a URDF: the one :func:`arm_urdf` embeds, or else the one its
+    joints and links describe (:func:`spec_from_urdf_chain`)."""
     m = re.search(re.escape(_SPEC_TAG) + r"\s*(\{.*?\})\s*-->", text)
     if m is None:
-        raise ValueError(
-            f"{source} is not an explore3d chain (no '{_SPEC_TAG}' comment); write one with `explore3d arm` "
-            "or explore3d.arm.urdf.write_arm_urdf"
-        )
+        return spec_from_urdf_chain(text, source)
     try:
         return ArmSpec(**json.loads(m.group(1)))
     except (TypeError, json.JSONDecodeError) as exc:
@@ -89,8 +88,9 @@ def spec_from_urdf_text(text: str, source: str = "URDF") -> ArmSpec:
 
 
 def load_arm(spec) -> ArmSpec:
-    """An :class:`ArmSpec` from a built-in name (``"paper"``, ``"default"``), a URDF path written by
-    :func:`write_arm_urdf`, or an ArmSpec (returned as is)."""
+    """An :class:`ArmSpec` from a built-in name (``"paper"``, ``"default"``), a URDF path (written by
+    :func:`write_arm_urdf`, or any URDF of such a chain: :func:`spec_from_urdf_chain`), or an ArmSpec
+    (returned as is)."""
     if isinstance(spec, ArmSpec):
         return spec
     key = str(spec)
@@ -106,3 +106,144 @@ def load_arm(spec) -> ArmSpec:
     except (OSError, UnicodeDecodeError) as exc:
         raise ValueError(f"cannot read arm URDF {key!r}: {exc}") from None
     return spec_from_urdf_text(text, source=key)
+
+
+def _floats(text, n: int, what: str) -> tuple:
+    try:
+        v = tuple(float(x) for x in (text or "").split())
+    except ValueError:
+        v = ()
+    if len(v) != n:
+        raise ValueError(f"{what} must be {n} numbers; got {text!r}")
+    return v
+
+
+def _close(a, b, rel: float = 1e-5) -> bool:
+    a, b = tuple(a) if isinstance(a, tuple) else (a,), tuple(b) if isinstance(b, tuple) else (b,)
+    scale = max(1e-9, max(abs(x) for x in a + b))
+    return all(abs(x - y) <= rel * scale for x, y in zip(a, b))
+
+
+def _box(link, source: str):
+    """(size (3,), origin xyz (3,)) of ``link``'s one collision box."""
+    boxes = link.findall("collision")
+    if len(boxes) != 1 or boxes[0].find("geometry/box") is None:
+        raise ValueError(f"{source}: link {link.get('name')!r} must have exactly one collision box (ArmSpec's "
+                         f"links are boxes); it has {len(boxes)} collision element(s)"
+                         + ("" if len(boxes) != 1 else " of another shape"))
+    c = boxes[0]
+    origin = c.find("origin")
+    xyz = (0.0, 0.0, 0.0) if origin is None or origin.get("xyz") is None else _floats(
+        origin.get("xyz"), 3, f"{source}: link {link.get('name')!r}'s collision origin")
+    rpy = (0.0, 0.0, 0.0) if origin is None or origin.get("rpy") is None else _floats(
+        origin.get("rpy"), 3, f"{source}: link {link.get('name')!r}'s collision rpy")
+    if not _close(rpy, (0.0, 0.0, 0.0)):
+        raise ValueError(f"{source}: link {link.get('name')!r}'s collision box is rotated (rpy {rpy}); ArmSpec's "
+                         "boxes are aligned with their link frames")
+    return _floats(c.find("geometry/box").get("size"), 3, f"{source}: link {link.get('name')!r}'s box size"), xyz
+
+
+def spec_from_urdf_chain(text: str, source: str = "URDF") -> ArmSpec:
+    """The :class:`ArmSpec` a URDF's joints and links describe, whoever wrote it.
+
+    ArmSpec's chain (:mod:`explore3d.arm.spec`): a fixed base link whose one collision box (a cube of
+    edge ``base_size``) sits behind joint 0, :data:`~explore3d.arm.spec.BASE_GAP_M` from it; then
+    ``n`` revolute joints in one serial chain, every axis the z axis, joint 0 at the base frame's
+    origin and joint i > 0 one link length along x from joint i - 1 (no rotation between frames);
+    every link one collision box ``L x W x H`` centred at ``(L / 2, 0, 0)``, of one mass; one pair
+    of joint limits; efforts ``max_torque`` plus twice each joint's gravity bound
+    (:meth:`~explore3d.arm.spec.ArmSpec.joint_torques`).  Numbers agree to a relative 1e-5 (a
+    URDF's printed precision).  Anything else -- branches, other joint types, another axis,
+    links of different sizes -- is refused with a ValueError naming the element and what
+    ArmSpec needs."""
+    import xml.etree.ElementTree as ET  # start-up: only for a URDF that is not explore3d's own
+
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise ValueError(f"{source} is not valid XML ({exc}); give a URDF file") from None
+    if root.tag != "robot":
+        raise ValueError(f"{source} is not a URDF (its root element is <{root.tag}>, not <robot>)")
+    links = {lk.get("name"): lk for lk in root.findall("link")}
+    joints = root.findall("joint")
+    if not joints:
+        raise ValueError(f"{source} has no joints; ArmSpec needs a chain of revolute joints")
+    for j in joints:
+        if j.get("type") != "revolute":
+            raise ValueError(f"{source}: joint {j.get('name')!r} is {j.get('type')!r}; ArmSpec's chain has only "
+                             "revolute joints (no fixed, prismatic or continuous ones)")
+    by_parent = {}
+    for j in joints:
+        parent = j.find("parent").get("link")
+        if parent in by_parent:
+            raise ValueError(f"{source}: link {parent!r} has more than one child joint ({by_parent[parent].get('name')!r}, "
+                             f"{j.get('name')!r}); ArmSpec needs one serial chain")
+        by_parent[parent] = j
+    children = {j.find("child").get("link") for j in joints}
+    roots = [name for name in links if name not in children]
+    if len(roots) != 1:
+        raise ValueError(f"{source}: the chain must start at one base link; found {roots or 'none'}")
+    chain, link = [], roots[0]
+    while link in by_parent:
+        chain.append(by_parent[link])
+        link = chain[-1].find("child").get("link")
+        if len(chain) > len(joints):
+            raise ValueError(f"{source}: the joints form a loop")
+    if len(chain) != len(joints):
+        raise ValueError(f"{source}: {len(joints) - len(chain)} joint(s) are not on the chain from {roots[0]!r}")
+    n = len(chain)
+    sizes, masses, lengths, limits, efforts = [], [], [], [], []
+    for i, j in enumerate(chain):
+        name = j.get("name")
+        axis = j.find("axis")
+        ax = (1.0, 0.0, 0.0) if axis is None else _floats(axis.get("xyz"), 3, f"{source}: joint {name!r}'s axis")
+        if not _close(ax, (0.0, 0.0, 1.0)):
+            raise ValueError(f"{source}: joint {name!r} turns about {ax}; ArmSpec's joints all turn about z (0 0 1)")
+        origin = j.find("origin")
+        xyz = _floats(origin.get("xyz", "0 0 0"), 3, f"{source}: joint {name!r}'s origin") if origin is not None \
+            else (0.0, 0.0, 0.0)
+        rpy = _floats(origin.get("rpy", "0 0 0"), 3, f"{source}: joint {name!r}'s rpy") if origin is not None \
+            else (0.0, 0.0, 0.0)
+        if not _close(rpy, (0.0, 0.0, 0.0)) or abs(xyz[1]) + abs(xyz[2]) > 1e-9:
+            raise ValueError(f"{source}: joint {name!r} sits at xyz {xyz} rpy {rpy} from its parent; ArmSpec's joint i "
+                             "sits one link length along x from joint i - 1, unrotated")
+        if i == 0 and abs(xyz[0]) > 1e-9:
+            raise ValueError(f"{source}: the first joint {name!r} must sit at the base frame's origin; it is at {xyz}")
+        if i > 0:
+            lengths.append(xyz[0])
+        lim = j.find("limit")
+        if lim is None:
+            raise ValueError(f"{source}: joint {name!r} has no <limit>; ArmSpec needs its angle limits and effort")
+        limits.append((float(lim.get("lower", "nan")), float(lim.get("upper", "nan"))))
+        efforts.append(float(lim.get("effort", "nan")))
+        child = links.get(j.find("child").get("link"))
+        if child is None:
+            raise ValueError(f"{source}: joint {name!r}'s child link is not defined")
+        size, centre = _box(child, source)
+        if not _close(centre, (size[0] / 2, 0.0, 0.0)):
+            raise ValueError(f"{source}: link {child.get('name')!r}'s box is centred at {centre}; ArmSpec's link box "
+                             f"is centred half a length along x, at ({size[0] / 2:g}, 0, 0)")
+        sizes.append(size)
+        mass = child.find("inertial/mass")
+        if mass is None:
+            raise ValueError(f"{source}: link {child.get('name')!r} has no <inertial><mass>")
+        masses.append(float(mass.get("value")))
+    for what, values in (("box sizes", sizes), ("masses", masses), ("joint limits", limits)):
+        if not all(_close(v, values[0]) for v in values):
+            raise ValueError(f"{source}: the links' {what} differ ({values[0]} and others); ArmSpec's links are identical")
+    L, W, H = sizes[0]
+    if lengths and not all(_close(x, L) for x in lengths):
+        raise ValueError(f"{source}: the joints are {sorted(set(lengths))} m apart but the links are {L:g} m long; "
+                         "ArmSpec's joints are one link length apart")
+    base_size, base_xyz = _box(links[roots[0]], source)
+    if not (_close(base_size, (base_size[0],) * 3) and _close(base_xyz, (-base_size[0] / 2 - BASE_GAP_M, 0.0, 0.0))):
+        raise ValueError(f"{source}: the base link's box ({base_size} at {base_xyz}) must be a cube behind joint 0, "
+                         f"centred at (-edge/2 - {BASE_GAP_M:g}, 0, 0)")
+    name = re.sub(r"[^A-Za-z0-9_\-]", "_", root.get("name") or "urdf") or "urdf"
+    spec = ArmSpec(name=name, n_links=n, link_length=L, link_width=W, link_height=H, link_mass=masses[0],
+                   joint_lower=limits[0][0], joint_upper=limits[0][1], max_torque=1.0, base_size=base_size[0])
+    max_torques = [e - 2.0 * g for e, g in zip(efforts, spec.gravity_torques())]
+    if not all(_close(t, max_torques[0], rel=1e-4) for t in max_torques) or not max_torques[0] > 0:
+        raise ValueError(f"{source}: the joints' efforts {efforts[:3]}... are not one max_torque > 0 plus twice the "
+                         "gravity bound of the chain beyond each joint (ArmSpec.joint_torques)")
+    return replace(spec, max_torque=max_torques[0])
