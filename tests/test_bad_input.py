@@ -167,6 +167,7 @@ CASES = [
     # reconstruct
     (["reconstruct", "--log", "@nowhere", "--out", "@o/m.obj"], 1, "holds no recording.json"),
     (["reconstruct", "--out", "@o/m.obj"], 2, "needs a point file"),
+    (["reconstruct", "{cloud}", "--readings", "--out", "@o/m.obj"], 2, "--readings reads a recording"),
     (["reconstruct", "{cloud}", "--log", "@nowhere", "--out", "@o/m.obj"], 2, "drop POINTS"),
     (["reconstruct", "@missing.ply", "--out", "@o/m.obj"], 1, "not found"),
     (["reconstruct", "{garbage_ply}", "--out", "@o/m.obj"], 1, "g.ply"),

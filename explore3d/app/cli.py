@@ -201,6 +201,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="instead of POINTS: the folder 'explore3d run ... --record DIR' wrote; the run's estimate is "
                         "rebuilt from its robot logs alone (the controller replayed, the contacts localised, the free "
                         "space swept and the hull built as the run did)")
+    c.add_argument("--readings", action="store_true",
+                   help="with --log or --bag: read the logs with no controller in the loop (sweeps, detections and "
+                        "settled readings found in the recorded references and readings), as for another "
+                        "controller's logs; without it the controller is replayed against them (exact for "
+                        "explore3d's own)")
     c.add_argument("--bag", metavar="DIR", default=None,
                    help="instead of POINTS: the ROS 2 bag of a recording (DIR/bag of 'explore3d run ... --record "
                         "DIR'; sqlite3 or MCAP, read with rosbags); the run's estimate is rebuilt from it as --log does")
@@ -545,7 +550,7 @@ def _reconstruct_log(args, out: Path, suffix: str) -> int:
         except ValueError as exc:
             raise RunError(f"{flag}: {exc}") from None
         try:
-            ex, est = reconstruct_recording(rec)
+            ex, est = reconstruct_recording(rec, replay=not args.readings)
         except ReconstructionError as exc:
             raise RunError(f"reconstruction failed: {exc}") from None
         except LogMismatchError as exc:
@@ -598,6 +603,8 @@ def cmd_reconstruct(args) -> int:
         raise UsageError("--log and --bag are two forms of one recording: give one")
     if args.log is not None or args.bag is not None:
         return _reconstruct_log(args, out, suffix)
+    if args.readings:
+        raise UsageError("--readings reads a recording: give --log DIR or --bag DIR")
     if args.points is None:
         raise UsageError("reconstruct needs a point file (POINTS) or a run's recording (--log DIR or --bag DIR)")
     centre = args.centre

@@ -20,7 +20,10 @@ checked against the recorded one, so the controller takes the recorded decisions
 contacts from the recorded readings, sweeps the free space from the recorded angles and builds
 the estimate as the run did (:func:`explore3d.app.pipeline.estimate_exploration`): the same
 arithmetic, so the same estimate.  A log recorded by another controller does not replay
-(:class:`~explore3d.robot.interface.LogMismatchError` names the first command that differs).
+(:class:`~explore3d.robot.interface.LogMismatchError` names the first command that differs); with
+``replay=False`` the logs are only read, with no controller in the loop
+(:mod:`explore3d.strategy.readings`: sweeps, detections and settled readings found in the
+recorded references and readings), which any controller's logs allow.
 """
 from __future__ import annotations
 
@@ -36,6 +39,7 @@ from explore3d.core.io import atomic_write_text, json_text
 from explore3d.feeling.detect import ContactBand
 from explore3d.robot.interface import LogWorkcell, RobotLog
 from explore3d.strategy.explore import Exploration, ExploreConfig, explore_robots
+from explore3d.strategy.readings import exploration_from_readings
 
 __all__ = ["RECORDING_FORMAT_VERSION", "RECORDING_NAME", "Recording", "read_recording", "reconstruct_recording",
            "recording_dict", "recording_from_dict", "write_recording"]
@@ -137,13 +141,17 @@ def recording_from_dict(meta: dict, logs, where="the recording") -> Recording:
                      table_z=meta["table_z_m"], a=float(meta["a"]), method=str(meta["method"]), logs=tuple(logs))
 
 
-def reconstruct_recording(rec: Recording, jobs: int | None = 1, progress=None):
+def reconstruct_recording(rec: Recording, jobs: int | None = 1, progress=None, replay: bool = True):
     """The estimate of a recorded run, rebuilt from its logs alone (module docstring).
 
     Args:
         rec: a :class:`Recording` (:func:`read_recording`).
         jobs: worker processes replaying the wraps (results do not depend on it).
         progress: as :func:`~explore3d.strategy.explore.explore_robots`'s.
+        replay: replay the controller against the logs (exact for explore3d's own logs); False:
+            read the logs with no controller in the loop
+            (:func:`explore3d.strategy.readings.exploration_from_readings`: any controller's logs,
+            the wraps as recorded, no probes planned).
 
     Returns:
         ``(exploration, estimate)``: the replayed :class:`Exploration` (carried back when the
@@ -155,8 +163,11 @@ def reconstruct_recording(rec: Recording, jobs: int | None = 1, progress=None):
         ReconstructionError: the contacts gave no hull.
     """
     config = replace(rec.config, jobs=jobs, record=False)
-    persistent = not config.scene.ideal and config.scene.persistent
-    ex = explore_robots(LogWorkcell(rec.logs), rec.spec, config, rec.band, rec.centre, rec.radius, progress,
-                        table_z=rec.table_z, persistent=persistent)
+    if replay:
+        persistent = not config.scene.ideal and config.scene.persistent
+        ex = explore_robots(LogWorkcell(rec.logs), rec.spec, config, rec.band, rec.centre, rec.radius, progress,
+                            table_z=rec.table_z, persistent=persistent)
+    else:
+        ex = exploration_from_readings(rec.logs, rec.spec, config, rec.band, rec.centre, rec.radius, rec.table_z)
     ex, _, _, _, est = estimate_exploration(ex, rec.centre, rec.radius, rec.a, rec.method)
     return ex, est

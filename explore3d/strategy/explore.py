@@ -705,6 +705,24 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
         if probing:
             rounds = _probe_rounds(spec, config, centre, radius, poses, results, run_probes,
                                    keep=None if floor_z is None else (lambda T: pose_clears(spec, T, floor_z)))
+    return exploration_from_wraps(spec, config, band, centre, radius, poses, results, table_z, t0, band_s,
+                                  rounds, moved, redone)
+
+
+def exploration_from_wraps(spec: ArmSpec, config: ExploreConfig, band: ContactBand, centre, radius: float, poses,
+                           results, table_z: float | None = None, t0: float | None = None, band_s: float = 0.0,
+                           rounds=(), moved=None, redone=None) -> Exploration:
+    """The :class:`Exploration` of wraps already run: ``results`` holds per wrap (in the order of
+    ``poses``) its attempts, physics steps, :class:`RobotLog` (or None), localised
+    :class:`ContactSet` and swept areas.  The hull's input is chosen here as the exploration
+    chooses it (:func:`~explore3d.feeling.contacts.contacts_for_hull` about the rough ``centre``
+    (3,), m, within ``radius``, m, above the table ``table_z``).  ``t0``: the
+    :func:`time.perf_counter` the exploration began at (None: now)."""
+    t0 = time.perf_counter() if t0 is None else t0
+    floor_z = config.floor_z(table_z)
+    n = len(results)
+    moved = [False] * n if moved is None else moved
+    redone = [False] * n if redone is None else redone
     attempts = tuple(tuple(r[0]) for r in results)
     steps = int(sum(r[1] for r in results))
     contacts = ContactSet.concatenate(r[3] for r in results)
