@@ -167,6 +167,8 @@ CASES = [
     # reconstruct
     (["reconstruct", "--log", "@nowhere", "--out", "@o/m.obj"], 1, "holds no recording.json"),
     (["reconstruct", "--out", "@o/m.obj"], 2, "needs a point file"),
+    (["reconstruct", "--bag", "@nowhere", "--readings", "--arm", "default", "--out", "@o/m.obj"], 2, "--band FILE"),
+    (["reconstruct", "--log", "@nowhere", "--arm", "default", "--out", "@o/m.obj"], 2, "--arm reads another"),
     (["reconstruct", "{cloud}", "--readings", "--out", "@o/m.obj"], 2, "--readings reads a recording"),
     (["reconstruct", "{cloud}", "--log", "@nowhere", "--out", "@o/m.obj"], 2, "drop POINTS"),
     (["reconstruct", "@missing.ply", "--out", "@o/m.obj"], 1, "not found"),

@@ -206,6 +206,20 @@ def build_parser() -> argparse.ArgumentParser:
                         "settled readings found in the recorded references and readings), as for another "
                         "controller's logs; without it the controller is replayed against them (exact for "
                         "explore3d's own)")
+    c.add_argument("--arm", default=None,
+                   help="with --bag --readings: the bag is another controller's, of this arm (built-in name or URDF); "
+                        "give --band, --centre X,Y,Z and --radius too")
+    c.add_argument("--band", metavar="FILE", default=None,
+                   help="with --arm: the contact band (a run's report.json, or JSON with swept_rad and other_rad)")
+    c.add_argument("--joint-states", dest="joint_states", default="/joint_states",
+                   help="with --arm: the sensor_msgs/JointState topic of angles, velocities, efforts (default "
+                        "/joint_states)")
+    c.add_argument("--references", default="/explore3d/joint_command",
+                   help="with --arm: the JointState topic whose position holds the position references")
+    c.add_argument("--base-pose", dest="base_pose", default="/explore3d/base_pose",
+                   help="with --arm: the geometry_msgs/PoseStamped topic of the base pose, one per motion")
+    c.add_argument("--joint-names", dest="joint_names", default=None,
+                   help="with --arm: the arm's joints in chain order, comma-separated (default joint0,joint1,...)")
     c.add_argument("--bag", metavar="DIR", default=None,
                    help="instead of POINTS: the ROS 2 bag of a recording (DIR/bag of 'explore3d run ... --record "
                         "DIR'; sqlite3 or MCAP, read with rosbags); the run's estimate is rebuilt from it as --log does")
@@ -525,14 +539,49 @@ def _grasp_line(entry: dict) -> str:
 
 # --- other commands ------------------------------------------------------------------------------
 
+def _foreign_recording(args):
+    """The :class:`~explore3d.app.offline.Recording` of another controller's bag: the arm, band,
+    rough bound and topics from the command line (``reconstruct --bag DIR --readings --arm ...``)."""
+    import numpy as np  # start-up: kept out of explore3d --help's
+
+    from explore3d.app.offline import Recording  # start-up: as above
+    from explore3d.app.rosbag import BagTopics, read_joint_bag  # start-up: as above
+    from explore3d.arm.urdf import load_arm  # start-up: as above
+    from explore3d.feeling.detect import ContactBand  # start-up: as above
+    from explore3d.strategy.explore import ExploreConfig  # start-up: as above
+
+    spec = load_arm(args.arm)
+    try:
+        data = json.loads(Path(args.band).read_text(encoding="utf-8"))
+        band = ContactBand.from_dict(data.get("contact_band", data))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise ValueError(f"--band {args.band}: not a contact band ({exc}); give a run's report.json or a JSON with "
+                         "swept_rad and other_rad") from None
+    if band.swept.shape != (spec.n_links,):
+        raise ValueError(f"--band {args.band} has {band.swept.shape[0]} joints; the arm {spec.name!r} has {spec.n_links}")
+    topics = BagTopics(joint_states=args.joint_states, references=args.references, base_pose=args.base_pose,
+                       joint_names=tuple(args.joint_names.split(",")) if args.joint_names else None)
+    logs = read_joint_bag(args.bag, spec, topics)
+    return Recording(spec=spec, config=ExploreConfig(), band=band, centre=np.asarray(args.centre, float),
+                     radius=float(args.radius), table_z=None, a=args.a, method=args.method, logs=logs)
+
+
 def _reconstruct_log(args, out: Path, suffix: str) -> int:
     """``reconstruct --log DIR`` or ``--bag DIR``: the recorded run's estimate from its logs alone
     (:func:`explore3d.app.offline.reconstruct_recording`)."""
+    foreign = args.arm is not None
     given = [flag for flag, v in (("POINTS", args.points), ("--free-space", args.free_space),
-                                  ("--radius", args.radius)) if v is not None]
-    if given or args.estimator != "inverse-hull" or args.centre != "midrange":
+                                  ("--radius", None if foreign else args.radius)) if v is not None]
+    if given or args.estimator != "inverse-hull" or (args.centre != "midrange" and not foreign):
         raise UsageError(f"--log and --bag rebuild the run as it was (its rough bound, free space and inverse hull): drop "
                          f"{', '.join(given) or '--centre/--estimator'}")
+    if foreign:
+        if args.bag is None or not args.readings:
+            raise UsageError("--arm reads another controller's bag: give --bag DIR --readings (an explore3d recording "
+                             "carries its arm)")
+        if args.band is None or not isinstance(args.centre, tuple) or len(args.centre) != 3 or args.radius is None:
+            raise UsageError("another controller's bag needs what the robot knew: --band FILE (the contact band, "
+                             "e.g. a run's report.json), --centre X,Y,Z and --radius R (the rough bound, metres)")
     with quiet_c_output():
         from explore3d.app.export import write_mesh  # start-up: kept out of explore3d --help's
         from explore3d.app.offline import read_recording, reconstruct_recording  # start-up: as above
@@ -543,6 +592,8 @@ def _reconstruct_log(args, out: Path, suffix: str) -> int:
         try:
             if args.log is not None:
                 rec = read_recording(args.log)
+            elif foreign:
+                rec = _foreign_recording(args)
             else:
                 from explore3d.app.rosbag import read_bag  # start-up: kept out of explore3d --help's
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +40,7 @@ from explore3d.app.offline import RECORDING_FORMAT_VERSION, Recording, recording
 from explore3d.core.io import json_text
 from explore3d.robot.interface import RobotLog
 
-__all__ = ["STORAGES", "TOPICS", "read_bag", "write_bag"]
+__all__ = ["STORAGES", "TOPICS", "BagTopics", "read_bag", "read_joint_bag", "write_bag"]
 
 #: The bag's topics and their message types (module docstring).
 TOPICS = {"/explore3d/recording": "std_msgs/msg/String", "/explore3d/motion": "std_msgs/msg/String",
@@ -229,4 +230,124 @@ def _logs(meta: dict, motions: list, steps: list, path: Path) -> tuple:
         if not all(np.isfinite(getattr(log, k)).all() for k in ("q", "dq", "tau", "q_ref", "dq_ref", "tau_ff")):
             raise ValueError(f"{path}, wrap {wrap}: a reading or command is NaN or infinite")
         logs.append(log)
+    return tuple(logs)
+
+
+@dataclass(frozen=True)
+class BagTopics:
+    """Where another controller's bag keeps what a reconstruction reads (:func:`read_joint_bag`).
+
+    Attributes:
+        joint_states: ``sensor_msgs/msg/JointState``: angles (rad), velocities (rad/s), motor
+            torques (``effort``, N m).
+        references: ``sensor_msgs/msg/JointState`` whose ``position`` holds the position
+            references (rad) the controller sent.
+        base_pose: ``geometry_msgs/msg/PoseStamped``, the arm's base in the world frame (m), one
+            message at the start of each motion.
+        joint_names: the arm's joints in the order of its chain (None: ``joint0`` ...).
+    """
+
+    joint_states: str = "/joint_states"
+    references: str = "/explore3d/joint_command"
+    base_pose: str = "/explore3d/base_pose"
+    joint_names: tuple | None = None
+
+
+def _order(names, want, topic, path):
+    """Indices of ``want`` in a message's ``names`` (a message without names is in chain order)."""
+    if not len(names):
+        return None
+    try:
+        return [list(names).index(w) for w in want]
+    except ValueError:
+        raise ValueError(f"{path}: {topic} names the joints {list(names)[:4]}...; the arm's are {list(want)[:4]}... "
+                         "(give their order with joint_names / --joint-names)") from None
+
+
+def read_joint_bag(path, spec, topics: BagTopics = BagTopics(), gravity=(0.0, 0.0, -9.81)) -> tuple:
+    """Robot logs from a ROS 1 or ROS 2 bag recorded by any controller: one
+    :class:`~explore3d.robot.interface.RobotLog` per base-pose message (a motion, taken as a wrap),
+    its readings from ``topics.joint_states`` and, for each, the last reference sent before it
+    (``topics.references``).  What the live controller's replay would also need (torque limits,
+    feed-forward) is not read: read the logs with
+    :func:`explore3d.strategy.readings.exploration_from_readings`.  ``spec``: the arm;
+    ``gravity`` (3,) m/s^2, world frame.  The control period is the median step between readings.
+    ValueError naming a missing topic, joint names that are not the arm's, too few readings,
+    NaN readings or stamps that go back."""
+    from rosbags.highlevel import AnyReader  # start-up: kept out of the module's import
+    from scipy.spatial.transform import Rotation  # start-up: as above
+
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"{path} does not exist; give a ROS 1 bag file or a ROS 2 bag folder")
+    names = list(topics.joint_names) if topics.joint_names else joint_names(spec.n_links)
+    if len(names) != spec.n_links:
+        raise ValueError(f"joint_names lists {len(names)} joints; the arm has {spec.n_links}")
+    poses, refs, readings = [], [], []
+    try:
+        with AnyReader([path], default_typestore=_TYPESTORE) as r:
+            have = {c.topic for c in r.connections}
+            missing = [t for t in (topics.joint_states, topics.references, topics.base_pose) if t not in have]
+            if missing:
+                raise ValueError(f"{path} has no topic {missing[0]!r} (its topics: {sorted(have)}); name the "
+                                 "topics with --joint-states, --references, --base-pose")
+            conns = [c for c in r.connections if c.topic in (topics.joint_states, topics.references, topics.base_pose)]
+            for conn, ns, raw in r.messages(connections=conns):
+                msg = r.deserialize(raw, conn.msgtype)
+                if conn.topic == topics.base_pose:
+                    q = msg.pose.orientation
+                    T = np.eye(4)
+                    T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+                    T[:3, 3] = [msg.pose.position.x, msg.pose.position.y, msg.pose.position.z]
+                    poses.append((ns, T))
+                elif conn.topic == topics.references:
+                    idx = _order(msg.name, names, conn.topic, path)
+                    p = np.asarray(msg.position, float)
+                    refs.append((ns, p if idx is None else p[idx]))
+                else:
+                    if readings and ns < readings[-1][0]:
+                        raise ValueError(f"{path}: {conn.topic} goes back in time at {ns} ns; sort the bag")
+                    idx = _order(msg.name, names, conn.topic, path)
+                    arr = [np.asarray(getattr(msg, f), float) for f in ("position", "velocity", "effort")]
+                    if idx is not None:
+                        arr = [a[idx] for a in arr]
+                    if any(len(a) != spec.n_links for a in arr):
+                        raise ValueError(f"{path}: {conn.topic} at {ns} ns has {[len(a) for a in arr]} values; the "
+                                         f"arm has {spec.n_links} joints (position, velocity and effort needed)")
+                    readings.append((ns, *arr))
+    except ValueError:
+        raise
+    except Exception as exc:  # rosbags' own errors
+        raise ValueError(f"cannot read the bag {path} ({type(exc).__name__}: {exc})") from None
+    # each reading with the last reference sent at or before its stamp, within the motion whose
+    # base pose came last before it
+    ref_ns = np.array([x[0] for x in refs], dtype=np.int64)
+    pose_ns = np.array([x[0] for x in poses], dtype=np.int64)
+    motions, rows = [], []
+    for ns, q, dq, tau in readings:
+        ri = int(np.searchsorted(ref_ns, ns, side="right")) - 1
+        pi = int(np.searchsorted(pose_ns, ns, side="right")) - 1
+        if ri < 0 or pi < 0:
+            continue  # before the first reference or the first base pose
+        if not motions or motions[-1][2] != pi:
+            motions.append((poses[pi][1], len(rows), pi))
+        rows.append((ns, q, dq, tau, refs[ri][1]))
+    motions = [(T, first) for T, first, _ in motions]
+    stamps = np.array([r[0] for r in rows], dtype=np.int64)
+    dt = float(np.median(np.diff(stamps))) * 1e-9
+    logs = []
+    bounds = [m[1] for m in motions] + [len(rows)]
+    for (T, first), end in zip(motions, bounds[1:]):
+        if end - first < 2:
+            continue
+        part = rows[first:end]
+        q, dq, tau, q_ref = (np.array([r[i] for r in part]) for i in (1, 2, 3, 4))
+        if not all(np.isfinite(a).all() for a in (q, dq, tau, q_ref)):
+            raise ValueError(f"{path}: a reading or reference after the base pose at {stamps[first]} ns is NaN or "
+                             "infinite")
+        zeros = np.zeros_like(q)
+        logs.append(RobotLog(spec=spec, dt=dt, gravity=np.asarray(gravity, float), base_T=T[None],
+                             start_q=q[:1].copy(), start_index=np.array([0]),
+                             t_s=(stamps[first:end] - stamps[first]) * 1e-9, q=q, dq=dq, tau=tau, q_ref=q_ref,
+                             dq_ref=zeros, torque_limit=np.full_like(q, np.inf), tau_ff=zeros))
     return tuple(logs)
