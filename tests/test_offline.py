@@ -234,3 +234,35 @@ def test_another_controllers_bag_is_read_with_the_arm_band_and_topics_given(reco
     assert main(bad) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no topic '/arm/commands'" in err[0]
+
+
+def test_a_band_measured_on_calibration_logs_is_the_twins():
+    """band_from_readings over a recorded free-motion calibration (the twin's own free sweeps,
+    recorded through the robot door) gives exactly the free-motion maxima calibrate_band
+    measures live, times band_factor (same detector, same numbers); a log that never sweeps a
+    joint is refused."""
+    from explore3d import ArmSpec
+    from explore3d.core.settings import SimConfig
+    from explore3d.robot.interface import RecordingRobot
+    from explore3d.robot.sensing import SensorConfig
+    from explore3d.strategy.encircle import ControlConfig
+    from explore3d.strategy.readings import band_from_readings
+    from explore3d.world.band import _free_motion, gravity_bounding_bases, self_contact_tolerance_m
+    from explore3d.world.sim import ArmSimulation
+
+    spec, control = ArmSpec(name="small8", n_links=8, link_length=0.03), ControlConfig()
+    tol = self_contact_tolerance_m(spec, control, SimConfig(), SensorConfig())
+    with ArmSimulation(spec) as world:
+        robot = world.robot(SensorConfig())
+        robot.reseed((1,))
+        rec = RecordingRobot(robot)
+        free, _ = _free_motion(rec, spec, control, gravity_bounding_bases(), tol)
+    band = band_from_readings([rec.log()], spec, control, tol)
+    assert np.array_equal(band.swept, control.band_factor * free.swept) and band.swept.max() > 0
+    assert np.array_equal(band.other, control.band_factor * free.other)
+    assert band.provenance["sweep_steps"] == free.steps.tolist()
+    log = rec.log()
+    first_only = log.__class__(**{**{f: getattr(log, f) for f in log.__dataclass_fields__},
+                                  "q_ref": np.minimum.accumulate(log.q_ref, axis=0)})  # no reference ever rises
+    with pytest.raises(ValueError, match="never sweep"):
+        band_from_readings([first_only], spec, control, tol)

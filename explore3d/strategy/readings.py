@@ -39,11 +39,75 @@ from explore3d.robot.interface import JointReading, RobotLog
 from explore3d.strategy.encircle import Attempt, ControlConfig, Moment
 from explore3d.strategy.explore import Exploration, ExploreConfig, exploration_from_wraps
 
-__all__ = ["motion_moments", "exploration_from_readings"]
+__all__ = ["band_from_readings", "exploration_from_readings", "motion_moments", "swept_joints"]
 
 
 def _reading(log: RobotLog, i: int) -> JointReading:
     return JointReading(t_s=float(log.t_s[i]), q=log.q[i].copy(), dq=log.dq[i].copy(), tau=log.tau[i].copy())
+
+
+def swept_joints(log: RobotLog, first: int, end: int) -> np.ndarray:
+    """(end - first,) int: the joint sweeping at each of the rows ``first`` .. ``end`` - 1 of
+    ``log`` (one motion): the first whose position reference rose since the row before; -1 for
+    none (and for the motion's first row)."""
+    q_ref = log.q_ref
+    rose = np.zeros((end - first, q_ref.shape[1]), dtype=bool)
+    rose[1:] = q_ref[first + 1:end] > q_ref[first:end - 1]
+    return np.where(rose.any(axis=1), rose.argmax(axis=1), -1)
+
+
+def band_from_readings(logs, spec: ArmSpec, control: ControlConfig = ControlConfig(),
+                       self_tolerance_m: float | None = None) -> ContactBand:
+    """A contact band measured on an arm's own contact-free calibration logs (free motion: every
+    joint swept with nothing to touch, e.g. in the orientations of
+    :func:`explore3d.world.band.gravity_bounding_bases`): per joint ``control.band_factor`` times
+    the largest filtered signal of the live detector (:class:`~explore3d.feeling.detect.SweepDetector`)
+    over every sweep step of the logs (module docstring: sweeps are found from the references),
+    the swept joint's lag for its own band and every joint's error change for the other band, as
+    :func:`explore3d.world.band.calibrate_band` measures the twin's free motion.  Steps at which the
+    arm, by its own model, touches itself (within ``self_tolerance_m``, default
+    ``control.self_contact_tolerance``) are left out.  A joint that never swept keeps band 0
+    (every signal of its sweeps would read as contact): ValueError names it.
+
+    Free motion alone is not the whole calibration: the twin's band also takes the contact-free
+    signals of wraps on known objects (impacts shake the other joints), and from free motion alone
+    the other-joint bands can be 0 (measured: 0 on the proximal joints of a 16-link arm), which
+    would read any error change as a contact.  Pass logs of contact-free wraps beside known
+    objects too, or take the twin's band (:func:`explore3d.world.band.cached_band`)."""
+    from explore3d.arm.selfcontact import self_contact_pairs  # start-up: kept out of the module's import
+
+    tol = control.self_contact_tolerance if self_tolerance_m is None else float(self_tolerance_m)
+    n = spec.n_links
+    lag_max, other_max, seen = np.zeros(n), np.zeros(n), np.zeros(n, dtype=int)
+    for log in logs:
+        if log.spec != spec:
+            raise ValueError(f"a calibration log is of the arm {log.spec.name!r}, not {spec.name!r}")
+        ends = list(log.start_index[1:]) + [log.n_steps]
+        for first, end in zip(log.start_index, ends):
+            first, end = int(first), int(end)
+            swept = swept_joints(log, first, end)
+            det, k_prev = None, -1
+            for i in range(1, end - first):
+                k = int(swept[i])
+                if k < 0:
+                    det, k_prev = None, -1
+                    continue
+                row = first + i
+                if k != k_prev:
+                    det, k_prev = SweepDetector(k, log.q_ref[row - 1], log.q[row - 1], control.watch_held), k
+                lag, sig = det.update(log.q_ref[row - 1][k], log.q_ref[row], log.q[row])
+                if self_contact_pairs(spec, log.q[row], tol):
+                    continue
+                seen[k] += 1
+                lag_max[k] = max(lag_max[k], lag)
+                np.maximum(other_max, np.abs(sig), out=other_max)
+    never = np.flatnonzero(seen == 0)
+    if len(never):
+        raise ValueError(f"the calibration logs never sweep joint(s) {never.tolist()}: sweep every joint of the arm "
+                         "with nothing to touch")
+    return ContactBand(swept=control.band_factor * lag_max, other=control.band_factor * other_max,
+                       provenance={"rule": "band_factor x the largest contact-free signal of the calibration logs",
+                                   "band_factor": control.band_factor, "sweep_steps": seen.tolist()})
 
 
 def motion_moments(log: RobotLog, first: int, end: int, band: ContactBand,
@@ -54,10 +118,7 @@ def motion_moments(log: RobotLog, first: int, end: int, band: ContactBand,
     n = q.shape[1]
     if band.swept.shape != (n,):
         raise ValueError(f"the contact band has {band.swept.shape[0]} joints; the log's arm has {n}")
-    # the swept joint of each step: the first whose reference rose since the previous step
-    rose = np.zeros((end - first, n), dtype=bool)
-    rose[1:] = q_ref[first + 1:end] > q_ref[first:end - 1]
-    swept = np.where(rose.any(axis=1), rose.argmax(axis=1), -1)
+    swept = swept_joints(log, first, end)
     out = []
     i = 1
     while i < end - first:
