@@ -266,3 +266,32 @@ def test_a_band_measured_on_calibration_logs_is_the_twins():
                                   "q_ref": np.minimum.accumulate(log.q_ref, axis=0)})  # no reference ever rises
     with pytest.raises(ValueError, match="never sweep"):
         band_from_readings([first_only], spec, control, tol)
+
+
+def test_a_ros1_bag_reads_as_the_ros2_one(recorded, tmp_path):
+    """The same readings written as a ROS 1 bag (rosbags' rosbag1 writer, the ROS 1 Noetic types)
+    give read_joint_bag the same logs as the ROS 2 bag (the base pose to rounding)."""
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    from explore3d.app.rosbag import _TYPESTORE, BagTopics, read_joint_bag
+    from explore3d.arm.urdf import load_arm
+
+    noetic = get_typestore(Stores.ROS1_NOETIC)
+    keep = ("/joint_states", "/explore3d/joint_command", "/explore3d/base_pose")
+    ros1 = tmp_path / "run.bag"
+    with Reader(recorded / "rec" / "bag") as r, Writer1(ros1) as w:
+        conns = {c.topic: w.add_connection(c.topic, c.msgtype, typestore=noetic) for c in r.connections
+                 if c.topic in keep}
+        for c, ns, raw in r.messages():
+            if c.topic in conns:
+                w.write(conns[c.topic], ns, _TYPESTORE.cdr_to_ros1(raw, c.msgtype))
+    spec = load_arm(str(recorded / "small16.urdf"))
+    a = read_joint_bag(recorded / "rec" / "bag", spec, BagTopics())
+    b = read_joint_bag(ros1, spec, BagTopics())
+    assert len(a) == len(b) == 8
+    for x, y in zip(a, b):
+        for k in ("q", "dq", "tau", "q_ref", "t_s"):
+            assert np.array_equal(getattr(x, k), getattr(y, k)), k
+        assert np.allclose(x.base_T, y.base_T, atol=1e-12)
