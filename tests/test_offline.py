@@ -1,6 +1,7 @@
 """A run's recording (``explore3d run --record DIR``) and its estimate rebuilt offline from the
 robot logs alone (``explore3d reconstruct --log DIR``, :mod:`explore3d.app.offline`; issue 26)."""
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -241,7 +242,7 @@ def test_a_band_measured_on_calibration_logs_is_the_twins():
     recorded through the robot door) gives exactly the free-motion maxima calibrate_band
     measures live, times band_factor (same detector, same numbers); a log that never sweeps a
     joint is refused."""
-    from explore3d import ArmSpec
+    from explore3d import ArmSpec, write_arm_urdf
     from explore3d.core.settings import SimConfig
     from explore3d.robot.interface import RecordingRobot
     from explore3d.robot.sensing import SensorConfig
@@ -261,6 +262,19 @@ def test_a_band_measured_on_calibration_logs_is_the_twins():
     assert np.array_equal(band.swept, control.band_factor * free.swept) and band.swept.max() > 0
     assert np.array_equal(band.other, control.band_factor * free.other)
     assert band.provenance["sweep_steps"] == free.steps.tolist()
+    import json as _json
+    import tempfile
+
+    from explore3d.app.cli import main
+
+    with tempfile.TemporaryDirectory() as d:  # the same through explore3d band --log
+        log_dir = Path(d) / "cal"
+        log_dir.mkdir()
+        rec.log().save(log_dir / "free.npz")
+        arm = write_arm_urdf(spec, Path(d) / "small8.urdf")
+        assert main(["band", "--arm", str(arm), "--log", str(log_dir), "--out", str(Path(d) / "band.json")]) == 0
+        written = _json.loads((Path(d) / "band.json").read_text())
+        assert written["swept_rad"] == band.swept.tolist() and written["other_rad"] == band.other.tolist()
     log = rec.log()
     first_only = log.__class__(**{**{f: getattr(log, f) for f in log.__dataclass_fields__},
                                   "q_ref": np.minimum.accumulate(log.q_ref, axis=0)})  # no reference ever rises

@@ -289,6 +289,18 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--jobs", type=RUN_OPTIONS["jobs"], help="worker processes for --3d (default: all cores)")
     t.set_defaults(func=cmd_table1)
 
+    b = sub.add_parser("band", help="write an arm's contact band: measured on its twin, or from its own logs",
+                       description="Write the contact band of --arm as JSON (swept_rad, other_rad, provenance): "
+                                   "measured on the arm's simulated twin with the default settings (cached), or with "
+                                   "--log DIR from the arm's own contact-free calibration logs (RobotLog .npz files: "
+                                   "free motion of every joint).  'explore3d reconstruct --band FILE' reads it.")
+    b.add_argument("--arm", default="default", help="built-in arm or URDF (default: default)")
+    b.add_argument("--log", metavar="DIR", default=None,
+                   help="a folder of the arm's contact-free calibration logs (*.npz, RobotLog files)")
+    b.add_argument("--planar", action="store_true", help="the twin's band for planar runs")
+    b.add_argument("--out", required=True, help="JSON file to write")
+    b.set_defaults(func=cmd_band)
+
     a = sub.add_parser("arm", help="write an arm URDF",
                        description="Write a chain arm URDF (explore3d.arm.urdf.write_arm_urdf); fields default to --base.")
     a.add_argument("--out", required=True, help="URDF file to write")
@@ -903,6 +915,44 @@ def arm_spec_from_args(args):
         return dataclasses.replace(base, **kw)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+
+
+def cmd_band(args) -> int:
+    """``explore3d band``: the contact band as JSON (:meth:`ContactBand.to_dict`)."""
+    out = Path(args.out)
+    if out.suffix.lower() != ".json":
+        raise UsageError(f"--out {out}: the band is written as JSON; give a file name ending in .json")
+    with quiet_c_output():
+        from explore3d.arm.urdf import load_arm  # start-up: kept out of explore3d --help's
+
+        try:
+            spec = load_arm(args.arm)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        paths = []
+        if args.log is not None:
+            paths = sorted(Path(args.log).glob("*.npz")) if Path(args.log).is_dir() else []
+            if not paths:
+                raise RunError(f"--log {args.log} holds no .npz robot logs; give the folder of the arm's calibration logs")
+        if not out.parent.is_dir():
+            raise RunError(f"the folder of --out {str(out)!r} does not exist; create it first")
+        if args.log is None:
+            from explore3d.world.band import cached_band  # start-up: as above
+
+            band = cached_band(spec, planar=args.planar)
+            how = "measured on the simulated twin"
+        else:
+            from explore3d.robot.interface import RobotLog  # start-up: as above
+            from explore3d.strategy.readings import band_from_readings  # start-up: as above
+
+            try:
+                band = band_from_readings([RobotLog.load(p) for p in paths], spec)
+            except ValueError as exc:
+                raise RunError(f"--log {args.log}: {exc}") from None
+            how = f"from {len(paths)} calibration log(s)"
+    atomic_write_text(out, _dump(band.to_dict()))
+    print(f"contact band of {spec.name} ({spec.n_links} joints), {how} -> {out}")
+    return 0
 
 
 def cmd_arm(args) -> int:
