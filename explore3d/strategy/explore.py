@@ -503,10 +503,11 @@ def current_estimate(spec, config, centre, radius, poses, results):
     return single_centre(used.points, used.wrap, centre, radius, swept, a=DEFAULT_A), used.points
 
 
-def _probe_rounds(spec, config, centre, radius, poses, results, run_poses, keep=None) -> list[dict]:
+def _probe_rounds(spec, config, centre, radius, poses, results, run_poses, keep=None, planning=None) -> list[dict]:
     """Rounds of probes (:mod:`explore3d.strategy.active`): wraps through the surface where the estimate
     could still be most wrong, until its volume at stake falls below ``stop_stake`` of its volume, a
-    round changes its volume by less than ``min_change``, no target is left or the rounds are spent."""
+    round changes its volume by less than ``min_change``, no target is left or the rounds are spent.
+    ``planning(k)``, when given, is called as round ``k`` (0-based) begins to plan (progress only)."""
     pc = config.probes
     d_min = spec.link_length if pc.min_distance_m is None else pc.min_distance_m
     excl = spec.link_height if pc.exclusion_m is None else pc.exclusion_m
@@ -514,6 +515,8 @@ def _probe_rounds(spec, config, centre, radius, poses, results, run_poses, keep=
     previous_fingers = np.zeros((0, 3))
     for k in range(pc.rounds):
         t0 = time.perf_counter()
+        if planning is not None:
+            planning(k)
         try:
             est, pts = current_estimate(spec, config, centre, radius, poses, results)
         except ValueError as exc:  # too few contacts for a hull: nothing to aim at
@@ -625,8 +628,8 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
         progress: None, or a callable ``progress(done, total)`` called after each wrap (``total``
             grows as the top search and the rounds of probes add wraps).  One that takes a third
             argument (:func:`takes_phase`) is called ``progress(done, total, phase)``, also as
-            each phase starts, with ``phase`` "planned wraps", "top search" or "probe round k of
-            at most n".
+            each phase starts, with ``phase`` "planned wraps", "top search", "planning probe round
+            k of at most n" (while its targets are chosen) or "probe round k of at most n".
         table_z: the table top's height, world z, m, the robot is told (None: no table).
         persistent: the wraps run in sequence in one workcell (the object stays where a wrap left
             it; ``config.jobs`` then does not apply).
@@ -703,8 +706,14 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
             _top_search(spec, config, centre, radius, table_z, poses, results, run_poses,
                         lambda T: pose_clears(spec, T, floor_z))
         if probing:
+            def planning(k):
+                nonlocal phase
+                phase = f"planning probe round {k + 1} of at most {config.probes.rounds}"
+                report()
+
             rounds = _probe_rounds(spec, config, centre, radius, poses, results, run_probes,
-                                   keep=None if floor_z is None else (lambda T: pose_clears(spec, T, floor_z)))
+                                   keep=None if floor_z is None else (lambda T: pose_clears(spec, T, floor_z)),
+                                   planning=planning if phased else None)
     return exploration_from_wraps(spec, config, band, centre, radius, poses, results, table_z, t0, band_s,
                                   rounds, moved, redone)
 
