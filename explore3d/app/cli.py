@@ -623,14 +623,9 @@ def _reconstruct_log(args, out: Path, suffix: str) -> int:
         if suffix == "json":
             atomic_write_text(out, _dump([[float(x), float(y)] for x, y in list(est.exterior.coords)[:-1]]))
         else:  # extruded as run extrudes it: over the arm's sensed height band, or --height about its plane
-            import trimesh  # start-up: kept out of explore3d --help's
+            from explore3d.app.pipeline import extruded  # start-up: kept out of explore3d --help's
 
-            from explore3d.app.pipeline import extrusion_band  # start-up: kept out of explore3d --help's
-
-            zlo, zhi = extrusion_band(ex, args.height)
-            m = trimesh.creation.extrude_polygon(est, zhi - zlo)
-            m.apply_translation([0.0, 0.0, zlo])
-            write_mesh(m, out, suffix)
+            write_mesh(extruded(est, ex, args.height), out, suffix)
         size = f"area {est.area:.6g} m^2"
     else:
         if suffix == "json":

@@ -28,6 +28,7 @@ import numpy as np
 import trimesh
 
 from explore3d.app.export import read_points_ply
+from explore3d.app.pictures import _plt
 from explore3d.app.settings import RunError
 from explore3d.core.io import atomic_write_bytes, atomic_write_text, json_text
 from explore3d.core.settings import SceneConfig
@@ -192,11 +193,9 @@ def grasp_run(run_dir, config: GraspConfig = GraspConfig(), pictures: bool = Tru
 def grasp_picture(mesh, grasps: list[dict]) -> bytes:
     """PNG bytes: ``mesh`` (grey) with each grasp as the segment between its contacts and a stub
     back along its approach, green where it held and red where it failed; three views."""
-    import matplotlib  # start-up: kept out of explore3d --help's
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # start-up: kept out of explore3d --help's
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # start-up: kept out of explore3d --help's
+
+    plt = _plt()  # matplotlib on the Agg backend
 
     fig = plt.figure(figsize=(12, 4.4))
     V = np.asarray(mesh.vertices) * 1e3

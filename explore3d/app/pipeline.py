@@ -154,8 +154,14 @@ def estimate_mesh(result: Result, height: float | None = None):
     est = result.estimate
     if result.exploration.config.mode != "planar":
         return est
-    zlo, zhi = extrusion_band(result.exploration, height)
-    m = trimesh.creation.extrude_polygon(est, zhi - zlo)
+    return extruded(est, result.exploration, height)
+
+
+def extruded(polygon, ex: Exploration, height: float | None = None):
+    """A planar exploration's estimate ``polygon`` (shapely, world x-y, m) as a closed trimesh
+    extruded over :func:`extrusion_band` of ``ex`` (``height``: as there)."""
+    zlo, zhi = extrusion_band(ex, height)
+    m = trimesh.creation.extrude_polygon(polygon, zhi - zlo)
     m.apply_translation([0.0, 0.0, zlo])
     return m
 

@@ -49,10 +49,9 @@ from explore3d.arm.spec import BASE_GAP_M
 from explore3d.core.defaults import DEFAULT_A
 from explore3d.core.interrupt import check_interrupt, import_optional
 from explore3d.core.io import atomic_path
-from explore3d.feeling.contacts import contacts_for_hull
 from explore3d.reconstruction.carve import carve
 from explore3d.reconstruction.tabletop import cut_at_table
-from explore3d.strategy.explore import wrap_planes
+from explore3d.strategy.explore import hulled_contacts
 
 __all__ = ["COLOUR_BY", "RecordingConfig", "VIZ_FIX", "check_recording_path", "contact_colours", "require_rerun",
            "write_rerun"]
@@ -245,7 +244,7 @@ def round_ends(ex) -> list[tuple[str, int]]:
 
 def prefix_estimate(result: Result, k: int, a: float = DEFAULT_A, method: str = "exponential"):
     """The 3D estimate the run had after its first ``k`` wraps: the hulled contacts of those
-    wraps (:func:`~explore3d.feeling.contacts.contacts_for_hull`, chosen again over them alone), or
+    wraps (:func:`~explore3d.strategy.explore.hulled_contacts`, chosen again over them alone), or
     their link points, their inverse hull carved by those wraps' swept space and cut at the
     table, as :func:`~explore3d.app.pipeline.estimate_exploration` builds the final one (wraps
     carried back after a motion stay as the run carried them).  Closed trimesh, world frame, m.
@@ -256,10 +255,7 @@ def prefix_estimate(result: Result, k: int, a: float = DEFAULT_A, method: str = 
     config = ex.config
     centre, radius = result.centre, result.radius
     if config.points == "contacts" and ex.contacts is not None:
-        cs = ex.contacts.select(ex.contacts.wrap < k)
-        cs = contacts_for_hull(cs, config, centre, radius, plane=wrap_planes(ex.poses))
-        if ex.table_z is not None:
-            cs = dataclasses.replace(cs, used=cs.used & (cs.points[:, 2] > config.floor_z(ex.table_z)))
+        cs = hulled_contacts(ex.contacts.select(ex.contacts.wrap < k), config, centre, radius, ex.poses, ex.table_z)
         used = cs.select(cs.used)
         points, pw, pa, pl = used.points, used.wrap, used.attempt, used.link
     else:

@@ -15,8 +15,9 @@ Topics (n joints, named ``joint0`` ... as in the arm's URDF):
   motors' torque limits (N m);
 * ``/explore3d/base_pose`` (``geometry_msgs/msg/PoseStamped``, frame ``world``), 1 ns before each
   motion's first reading: ``T_world_base`` (for ROS tools);
-* ``/explore3d/motion`` (``std_msgs/msg/String``), 1 ns before each motion's first reading: JSON ``{"wrap", "motion", "start_q", "base_T"}`` (the wrap's index, the motion's index
-  in it, the rest angles, rad, and the (4, 4) base pose, exact);
+* ``/explore3d/motion`` (``std_msgs/msg/String``), 1 ns before each motion's first reading: JSON
+  ``{"wrap", "motion", "start_q", "base_T"}`` (the wrap's index, the motion's index in it, the
+  rest angles, rad, and the (4, 4) base pose, exact);
 * ``/explore3d/recording`` (``std_msgs/msg/String``), first: the recording's ``recording.json``
   (the arm, the settings, the band, the rough bound, the table height) plus ``dt_s`` and
   ``gravity_m_s2``.
@@ -33,10 +34,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
+from scipy.spatial.transform import Rotation
 
 from explore3d.app.offline import RECORDING_FORMAT_VERSION, Recording, recording_from_dict
+from explore3d.arm.spec import ArmSpec
 from explore3d.core.io import json_text
 from explore3d.robot.interface import RobotLog
 
@@ -74,7 +78,6 @@ def _joint_state(ns: int, names, position, velocity, effort):
 
 
 def _pose(ns: int, T_world_base):
-    from scipy.spatial.transform import Rotation  # start-up: kept out of the module's import
 
     T = _TYPESTORE.types
     x, y, z, w = Rotation.from_matrix(np.asarray(T_world_base, float)[:3, :3]).as_quat()
@@ -194,7 +197,6 @@ def read_bag(path) -> Recording:
 
 
 def _logs(meta: dict, motions: list, steps: list, path: Path) -> tuple:
-    from explore3d.arm.spec import ArmSpec  # start-up: kept out of the module's import
 
     spec = ArmSpec(**meta["arm"])
     dt, gravity = float(meta["dt_s"]), np.asarray(meta["gravity_m_s2"], float)
@@ -274,8 +276,6 @@ def read_joint_bag(path, spec, topics: BagTopics = BagTopics(), gravity=(0.0, 0.
     ``gravity`` (3,) m/s^2, world frame.  The control period is the median step between readings.
     ValueError naming a missing topic, joint names that are not the arm's, too few readings,
     NaN readings or stamps that go back."""
-    from rosbags.highlevel import AnyReader  # start-up: kept out of the module's import
-    from scipy.spatial.transform import Rotation  # start-up: as above
 
     path = Path(path)
     if not path.exists():

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import re
+import xml.etree.ElementTree as ET
 from dataclasses import replace
 from pathlib import Path
 
@@ -156,8 +157,6 @@ def spec_from_urdf_chain(text: str, source: str = "URDF") -> ArmSpec:
     URDF's printed precision).  Anything else -- branches, other joint types, another axis,
     links of different sizes -- is refused with a ValueError naming the element and what
     ArmSpec needs."""
-    import xml.etree.ElementTree as ET  # start-up: only for a URDF that is not explore3d's own
-
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:

@@ -200,6 +200,10 @@ class RobotLog:
     def n_steps(self) -> int:
         return len(self.t_s)
 
+    def reading(self, i: int) -> JointReading:
+        """Row ``i``'s :class:`JointReading` (copies of its angles, velocities and torques)."""
+        return JointReading(t_s=float(self.t_s[i]), q=self.q[i].copy(), dq=self.dq[i].copy(), tau=self.tau[i].copy())
+
     def save(self, path) -> Path:
         """Write the log to ``path`` (.npz) atomically; returns the path."""
         path = Path(path)
@@ -337,9 +341,6 @@ class LogRobot(Robot):
         """Every motion and step of the log has been played."""
         return self._motion == self._log.n_motions - 1 and self._i == self._end - 1
 
-    def _reading(self) -> JointReading:
-        L, i = self._log, self._i
-        return JointReading(t_s=float(L.t_s[i]), q=L.q[i].copy(), dq=L.dq[i].copy(), tau=L.tau[i].copy())
 
     def start(self, T_world_base, q0) -> JointReading:
         L = self._log
@@ -352,7 +353,7 @@ class LogRobot(Robot):
         self._motion = m
         self._i = int(L.start_index[m])
         self._end = int(L.start_index[m + 1]) if m + 1 < L.n_motions else L.n_steps
-        return self._reading()
+        return self._log.reading(self._i)
 
     def step(self, command: JointCommand) -> JointReading:
         L = self._log
@@ -366,7 +367,7 @@ class LogRobot(Robot):
             if not np.allclose(got, getattr(L, name)[i], rtol=0.0, atol=self._atol):
                 raise LogMismatchError(f"motion {self._motion}, log row {i}: the command's {name} differs from the log's")
         self._i = i
-        return self._reading()
+        return self._log.reading(self._i)
 
 
 class LogWorkcell(Workcell):

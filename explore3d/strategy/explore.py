@@ -718,6 +718,18 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
                                   rounds, moved, redone)
 
 
+def hulled_contacts(contacts: ContactSet, config: ExploreConfig, centre, radius: float, poses,
+                    table_z: float | None = None) -> ContactSet:
+    """``contacts`` with ``used`` marking the hull's input as the exploration chooses it:
+    :func:`~explore3d.feeling.contacts.contacts_for_hull` about the rough ``centre`` (3,), m, within
+    ``radius``, m, the wraps' planes from ``poses``, and on a table (``table_z``, world z, m) only
+    those above its clearance (a contact located at the table is the table's)."""
+    contacts = contacts_for_hull(contacts, config, centre, radius, plane=wrap_planes(poses))
+    if table_z is not None:
+        contacts = dataclasses.replace(contacts, used=contacts.used & (contacts.points[:, 2] > config.floor_z(table_z)))
+    return contacts
+
+
 def exploration_from_wraps(spec: ArmSpec, config: ExploreConfig, band: ContactBand, centre, radius: float, poses,
                            results, table_z: float | None = None, t0: float | None = None, band_s: float = 0.0,
                            rounds=(), moved=None, redone=None) -> Exploration:
@@ -728,7 +740,6 @@ def exploration_from_wraps(spec: ArmSpec, config: ExploreConfig, band: ContactBa
     (3,), m, within ``radius``, m, above the table ``table_z``).  ``t0``: the
     :func:`time.perf_counter` the exploration began at (None: now)."""
     t0 = time.perf_counter() if t0 is None else t0
-    floor_z = config.floor_z(table_z)
     n = len(results)
     moved = [False] * n if moved is None else moved
     redone = [False] * n if redone is None else redone
@@ -736,9 +747,7 @@ def exploration_from_wraps(spec: ArmSpec, config: ExploreConfig, band: ContactBa
     steps = int(sum(r[1] for r in results))
     contacts = ContactSet.concatenate(r[3] for r in results)
     if config.points == "contacts":
-        contacts = contacts_for_hull(contacts, config, centre, radius, plane=wrap_planes(poses))
-        if table_z is not None:  # located at the table (at most its clearance above it): the table's
-            contacts = dataclasses.replace(contacts, used=contacts.used & (contacts.points[:, 2] > floor_z))
+        contacts = hulled_contacts(contacts, config, centre, radius, poses, table_z)
         used = contacts.select(contacts.used)
         d = 2 if config.mode == "planar" else 3
         points, pw, pa, pl = used.points[:, :d], used.wrap, used.attempt, used.link

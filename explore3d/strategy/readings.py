@@ -30,20 +30,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from explore3d.arm.selfcontact import self_contact_pairs
 from explore3d.arm.spec import ArmSpec
 from explore3d.feeling.contacts import localise_attempts
 from explore3d.feeling.detect import ContactBand, SweepDetector
 from explore3d.geometry.directions import WrapPose
 from explore3d.reconstruction.freespace import swept_area
-from explore3d.robot.interface import JointReading, RobotLog
+from explore3d.robot.interface import RobotLog
 from explore3d.strategy.encircle import Attempt, ControlConfig, Moment
 from explore3d.strategy.explore import Exploration, ExploreConfig, exploration_from_wraps
 
 __all__ = ["band_from_readings", "exploration_from_readings", "motion_moments", "swept_joints"]
-
-
-def _reading(log: RobotLog, i: int) -> JointReading:
-    return JointReading(t_s=float(log.t_s[i]), q=log.q[i].copy(), dq=log.dq[i].copy(), tau=log.tau[i].copy())
 
 
 def swept_joints(log: RobotLog, first: int, end: int) -> np.ndarray:
@@ -74,8 +71,6 @@ def band_from_readings(logs, spec: ArmSpec, control: ControlConfig = ControlConf
     the other-joint bands can be 0 (measured: 0 on the proximal joints of a 16-link arm), which
     would read any error change as a contact.  Pass logs of contact-free wraps beside known
     objects too, or take the twin's band (:func:`explore3d.world.band.cached_band`)."""
-    from explore3d.arm.selfcontact import self_contact_pairs  # start-up: kept out of the module's import
-
     tol = control.self_contact_tolerance if self_tolerance_m is None else float(self_tolerance_m)
     n = spec.n_links
     lag_max, other_max, seen = np.zeros(n), np.zeros(n), np.zeros(n, dtype=int)
@@ -152,7 +147,7 @@ def motion_moments(log: RobotLog, first: int, end: int, band: ContactBand,
                 still = True
                 break
             m += 1
-        out.append(Moment(joint=k, step=last, still=still, reading=_reading(log, first + last)))
+        out.append(Moment(joint=k, step=last, still=still, reading=log.reading(first + last)))
         # the rest of this sweep (the live controller ends it at the detection)
         i = last + 1
         while i < end - first and swept[i] == k:
