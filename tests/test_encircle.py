@@ -139,7 +139,7 @@ def test_a_wrap_does_not_depend_on_the_wraps_before_it():
     def run(order):
         _init_worker(SimWorkcells(spec, np.asarray(m.vertices, float), np.asarray(m.faces, np.int64), cfg.sim))
         try:
-            return {i: _run_one((i, poses[i].T_world_base, band, cfg, (c, r), None))[0] for i in order}
+            return {i: _run_one((i, poses[i], band, cfg, (c, r), None))[0] for i in order}
         finally:
             _WORKER.clear()
 

@@ -236,11 +236,12 @@ ORACLE_FREE = textwrap.dedent("""
     from explore3d.app.pipeline import run
     arm = ArmSpec(name="small12", n_links=12, link_length=0.025)
     res = run(cube(), arm, ExploreConfig(directions=24, angles=1, jobs=2, record=True,
-                                         probes=ProbeConfig(rounds=1, targets=2, fingers=2)))
+                                         probes=ProbeConfig(rounds=1, targets=2, fingers=2, pokes=2)))
     ex = res.exploration
     # a round of probe wraps ran in the workers, and the estimate was carved with the swept space
     assert len(ex.probe_rounds) == 1 and ex.n_wraps == 24 + ex.probe_rounds[0]["wraps"] > 24
     assert any(p.label.startswith("finger") for p in ex.poses)  # finger probes planned on the estimate ran
+    assert any(p.label.startswith("poke") for p in ex.poses)  # and tip pokes
     assert len(ex.swept) == ex.n_wraps and res.carved is not None
     assert ex.n_contacts > 0 and ex.config.control.gravity_compensation and ex.logs is not None
     # the arm collided with itself and told it from the object by its own model: attempts ended so
@@ -265,7 +266,8 @@ ORACLE_FREE = textwrap.dedent("""
 def test_exploration_runs_with_every_world_query_removed_from_pybullet(tmp_path):
     """The world queries are deleted from the pybullet module *before* explore3d is imported, so no
     alias bound at import time escapes; a 3D exploration with gravity compensation, two worker
-    processes, the contact localisation, the free space, a round of probes (wraps and fingers) aimed from the estimate,
+    processes, the contact localisation, the free space, a round of probes (wraps, fingers and tip pokes) aimed from
+    the estimate,
     self-contacts ending attempts and the carved reconstruction runs in that process and its
     workers; so does a curl-back exploration."""
     env = {**os.environ, "EXPLORE3D_CACHE_DIR": str(tmp_path)}

@@ -164,6 +164,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--fingers", type=RUN_OPTIONS["fingers"], metavar="N",
                    help="3d: finger probes per round of probes: the straight arm laid alongside unsupported "
                         "surface through space the estimate leaves empty, then swept onto it (default 12; 0: none)")
+    r.add_argument("--pokes", type=RUN_OPTIONS["pokes"], metavar="N",
+                   help="3d: tip pokes per round of probes: the tip, the distal links bent into a hook, brought "
+                        "along the estimate's inward normal onto unsupported surface (default 0: none)")
     r.add_argument("--probe-rank", dest="probe_rank", type=RUN_OPTIONS["probe_rank"],
                    help="3d: how probe targets are chosen: stake (default: the most volume the estimate could still "
                         "have wrong, area x distance to the nearest contact) or distance (the farthest from every "
@@ -268,6 +271,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="3d: rounds of probe wraps aimed at the estimate (default 3; 0: none)")
     k.add_argument("--fingers", type=RUN_OPTIONS["fingers"], metavar="N",
                    help="3d: finger probes per round of probes (default 12; 0: none)")
+    k.add_argument("--pokes", type=RUN_OPTIONS["pokes"], metavar="N",
+                   help="3d: tip pokes per round of probes (default 0: none)")
     k.add_argument("--encircle", type=RUN_OPTIONS["encircle"], help="straight (default) or curl-back")
     k.add_argument("--no-free-space", dest="no_free_space", action="store_true",
                    help="3d: neither record the swept space nor carve with it (the paper's hull of the straight "
@@ -787,7 +792,7 @@ def cmd_evaluate(args) -> int:
 def cmd_compare(args) -> int:
     _check_object_name(args.object)
     opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs", "probes", "fingers",
-                                          "encircle")
+                                          "pokes", "encircle")
             if getattr(args, k) is not None}
     config = explore_config({**opts, "probes": 0} if args.no_free_space else opts)
     if args.no_free_space:

@@ -176,6 +176,8 @@ RUN_OPTIONS = {
     "probes": _int_min("--probes", 0),
     # finger probes per round: the straight arm laid alongside unsupported surface in carved space
     "fingers": _int_min("--fingers", 0),
+    # tip pokes per round: the tip brought along the estimate's inward normal onto unsupported surface
+    "pokes": _int_min("--pokes", 0),
     # how probe targets are ranked: the most volume at stake (area x distance to a contact) or the farthest
     # from every contact beyond a link length (the rule before issue 24)
     "probe_rank": _choice("probe_rank", ("stake", "distance")),
@@ -283,7 +285,7 @@ def explore_config(opts: dict):
             kw["sensors"] = dataclasses.replace(kw.get("sensors", SensorConfig()), seed=opts["noise_seed"])
         if opts.get("collision_margin") is not None:
             kw["sim"] = SimConfig(collision_margin=opts["collision_margin"])
-        if opts.get("probes") is not None or opts.get("fingers") is not None or opts.get("probe_rank") is not None:
+        if any(opts.get(k) is not None for k in ("probes", "fingers", "pokes", "probe_rank")):
             probes = ProbeConfig() if opts.get("probes") is None else ProbeConfig(rounds=opts["probes"])
             if opts.get("probe_rank") == "distance":  # the former rule whole: its one-link floor too
                 probes = dataclasses.replace(probes, rank="distance", min_distance_m=None)
@@ -292,6 +294,11 @@ def explore_config(opts: dict):
                     raise ValueError("--fingers places finger probes in the rounds of probes: give --probes >= 1 "
                                      "(or leave --probes at its default)")
                 probes = dataclasses.replace(probes, fingers=opts["fingers"])
+            if opts.get("pokes") is not None:
+                if not probes.rounds and opts["pokes"]:
+                    raise ValueError("--pokes places tip pokes in the rounds of probes: give --probes >= 1 "
+                                     "(or leave --probes at its default)")
+                probes = dataclasses.replace(probes, pokes=opts["pokes"])
             kw["probes"] = probes if probes.rounds else None
         if opts.get("encircle") == "curl-back":
             kw["curl_back"] = CurlBack()
@@ -305,4 +312,4 @@ def explore_config(opts: dict):
 #: Settings a sweep's grid may sweep (explore3d.app.sweep), each an option of ``explore3d run`` (see ``explore3d run --help``).
 SWEEP_KEYS = ("a", "angles", "arm", "attempts", "base_step", "clearance", "collision_margin", "directions",
               "encircle", "face_offset", "fingers", "grasp", "method", "mirrored", "mode", "n_along", "n_height", "noise_seed", "offsets",
-              "points", "probe_rank", "probes", "scene", "seed", "sensing", "size")
+              "points", "pokes", "probe_rank", "probes", "scene", "seed", "sensing", "size")

@@ -24,7 +24,7 @@ import trimesh
 from explore3d.arm.kinematics import link_transforms
 from explore3d.arm.selfcontact import near_other_body
 from explore3d.arm.spec import ArmSpec
-from explore3d.feeling.localise import Localisation, external_torques, localise
+from explore3d.feeling.localise import TIP_EXTRA, Localisation, external_torques, localise
 from explore3d.reconstruction.hull_input import reconstruct_points
 from explore3d.robot.sensing import SensorConfig
 
@@ -180,13 +180,23 @@ def on_the_arm(spec: ArmSpec, q, T_world_base, contacts) -> np.ndarray:
 
 def localise_attempts(spec: ArmSpec, attempts, gravity, sensors: SensorConfig, wrap: int = 0) -> ContactSet:
     """Localise every moment of one wrap's ``attempts`` (see :func:`localise_moment`); ``wrap``
-    labels them.  Contacts that lie on the arm itself are marked (:attr:`ContactSet.self_contact`)."""
+    labels them.  Contacts that lie on the arm itself are marked (:attr:`ContactSet.self_contact`).
+
+    A tip poke's contact on the tip's distal face or its outer distal corner (an attempt with
+    ``poke`` set) lies at the link's distal end, x = L: its profile interval is that point.  The
+    hook puts the joints off the force's line, so the torques place it (across the face, to the
+    fit's sigma); on a straight chain they cannot, and such contacts keep no interval (infinitely
+    uncertain, :func:`contact_uncertainty_m`)."""
     rows = []
     for ai, att in enumerate(attempts):
         for m in att.moments:
             loc = localise_moment(spec, m, att.T_world_base, gravity, sensors)
             if not loc.contacts:
                 continue
+            if getattr(att, "poke", False):
+                loc = dataclasses.replace(loc, contacts=tuple(
+                    dataclasses.replace(c, along_interval_m=(spec.link_length, spec.link_length))
+                    if c.link == spec.n_links - 1 and c.kind in TIP_EXTRA else c for c in loc.contacts))
             on_arm = on_the_arm(spec, m.reading.q, att.T_world_base, loc.contacts)
             for c, s in zip(loc.contacts, on_arm):
                 rows.append((c, ai, m, loc.residual_nm, bool(s), loc.sigma_nm))

@@ -48,7 +48,7 @@ from scipy.optimize import nnls
 from explore3d.arm.kinematics import gravity_torques, link_transforms
 from explore3d.arm.spec import ArmSpec
 
-__all__ = ["LocalContact", "Localisation", "localise", "external_torques", "link_outline", "KINDS", "INNER_SIDE", "INNER_SIDE_ROUNDED", "inverse_dynamics",
+__all__ = ["LocalContact", "Localisation", "localise", "external_torques", "link_outline", "KINDS", "INNER_SIDE", "INNER_SIDE_ROUNDED", "TIP_EXTRA", "inverse_dynamics",
            "torques_of_contacts"]
 
 #: Candidate kinds on a link's in-plane outline: four faces, four corners.

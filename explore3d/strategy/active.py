@@ -68,6 +68,10 @@ class ProbeConfig:
             Default 12: measured on the concave and non-convex sets (BENCHMARKS.md) the U-channel
             went from 23.1 to 18.1%, the torus 30.8 to 21.8%, the T prism 15.8 to 12.9%, the
             others within a point, the cube 2.25 to 2.02%, for 7-36 one-attempt wraps more.
+        pokes: tip pokes (:mod:`explore3d.strategy.poke`) at up to this many targets per round
+            (chosen like the wraps' but apart from earlier pokes' targets; 0, default: none): the
+            tip brought along the estimate's inward normal onto the target and up to the target's
+            distance from every contact plus a link width past it.
     """
 
     rounds: int = 3
@@ -81,6 +85,7 @@ class ProbeConfig:
     min_change: float = 0.0
     samples: int = 4000
     fingers: int = 12
+    pokes: int = 0
 
     def __post_init__(self):
         for name, lo in (("rounds", 0), ("targets", 1), ("orientations", 1), ("samples", 10)):
@@ -96,6 +101,7 @@ class ProbeConfig:
         if not isinstance(self.across, bool):
             raise ValueError(f"ProbeConfig.across must be True or False; got {self.across!r}")
         check_field(self, "fingers", 0, integer=True)
+        check_field(self, "pokes", 0, integer=True)
 
 
 def surface_stake(mesh, contacts, samples: int = 4000, seed: int = 0):

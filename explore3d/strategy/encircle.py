@@ -324,6 +324,9 @@ class Attempt:
             contacts are localised from.
         trajectory: (t, n) measured joint angles at every step when recorded, else None.
         trajectory_ref: (t, n) references at every step when recorded, else None.
+        poke: a tip poke (:func:`explore3d.strategy.poke.run_poke`): the chain bent into a hook,
+            so a force on the tip's distal face is seen by the joints (its contacts there count,
+            :func:`explore3d.feeling.contacts.localise_attempts`).
     """
 
     T_world_base: np.ndarray
@@ -338,6 +341,7 @@ class Attempt:
     contact_step: np.ndarray | None = None
     trajectory_joint: np.ndarray | None = None
     moments: tuple = ()
+    poke: bool = False
 
 
 @dataclass(frozen=True)
@@ -410,9 +414,10 @@ class Controller:
         self.steps = 0
         self.traj, self.traj_ref, self.traj_joint = ([], [], []) if record else (None, None, None)
 
-    def start(self) -> np.ndarray:
-        """Begin the motion with the arm straight at rest; returns the first reading's angles."""
-        self.reading = self.robot.start(self.T, self.zero)
+    def start(self, q0=None) -> np.ndarray:
+        """Begin the motion at rest at ``q0`` (n,) rad (None: the arm straight); returns the first
+        reading's angles."""
+        self.reading = self.robot.start(self.T, self.zero if q0 is None else np.asarray(q0, dtype=np.float64))
         return self.reading.q
 
     def send(self, q_ref, dq_ref=None, limits=None) -> np.ndarray:
@@ -552,6 +557,40 @@ def press_to_force(ctl: Controller, k: int, q_ref: np.ndarray, limits: np.ndarra
         if not still:
             break
     return still, reading
+
+
+def settle_touch(ctl: Controller, k: int, q_ref: np.ndarray, sweep_torque: float, contact: np.ndarray) -> Moment:
+    """After joint ``k``'s sweep detected a touch at the reading ``ctl.reading``: re-reference the
+    held joints and the carried chain (:class:`ControlConfig`; ``q_ref`` (n,) rad changes in place,
+    ``contact`` (n,) bool marks the joints whose sweeps touched so far), settle pressing with the
+    sweep's torque limit ``sweep_torque`` N m (then with the chosen force) or holding where it
+    stands, read the quasi-static moment, and hold there with the full torque.  Returns the
+    :class:`Moment` the touch is localised from."""
+    cfg = ctl.cfg
+    q = ctl.reading.q
+    if cfg.rereference_held:
+        q_ref[:k] = q[:k] + cfg.hold_bias * contact[:k]
+    if cfg.rereference_distal:  # the carried chain, bent by the touch, does not push back
+        q_ref[k + 1:] = q[k + 1:]
+    still, held = False, None
+    if cfg.press_while_settling:  # keep the sweep's reference and torque limit: a gentle push
+        held = ctl.full.copy()
+        held[k] = sweep_torque
+        still, reading = ctl.settle(q_ref, held)
+        if still and cfg.press_force_n is not None:  # then press with the chosen force
+            still, reading = press_to_force(ctl, k, q_ref, held, cfg.press_force_n)
+    if not still:  # hold where it stands (after a press that never came to rest: let go)
+        q_ref[k] = ctl.reading.q[k] + cfg.hold_bias
+        held = None
+        still, reading = ctl.settle(q_ref)
+    n_read = 1
+    if still and cfg.average_steps:
+        reading, n_read = ctl.average(q_ref, held, cfg.average_steps), cfg.average_steps
+    moment = Moment(joint=k, step=ctl.steps, still=still, reading=reading, readings=n_read)
+    if cfg.press_while_settling:  # then hold where it is with the full torque
+        q_ref[k] = ctl.reading.q[k] + cfg.hold_bias
+        ctl.hold(q_ref)
+    return moment
 
 
 def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: ContactBand | None,
@@ -704,29 +743,8 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
         elif reason is StopReason.CONTACT:
             contact[k] = True
             contact_step[k] = ctl.steps
-            if cfg.rereference_held:
-                q_ref[:k] = q[:k] + cfg.hold_bias * contact[:k]
-            if cfg.rereference_distal:  # the carried chain, bent by the touch, does not push back
-                q_ref[k + 1:] = q[k + 1:]
-            still, held = False, None
-            if cfg.press_while_settling:  # keep the sweep's reference and torque limit: a gentle push
-                held = ctl.full.copy()
-                held[k] = sweep_torques[k]
-                still, reading = ctl.settle(q_ref, held)
-                if still and cfg.press_force_n is not None:  # then press with the chosen force
-                    still, reading = press_to_force(ctl, k, q_ref, held, cfg.press_force_n)
-            if not still:  # hold where it stands (after a press that never came to rest: let go)
-                q_ref[k] = ctl.reading.q[k] + cfg.hold_bias
-                held = None
-                still, reading = ctl.settle(q_ref)
-            n_read = 1
-            if still and cfg.average_steps:
-                reading, n_read = ctl.average(q_ref, held, cfg.average_steps), cfg.average_steps
-            moments.append(Moment(joint=k, step=ctl.steps, still=still, reading=reading, readings=n_read))
+            moments.append(settle_touch(ctl, k, q_ref, sweep_torques[k], contact))
             q = ctl.reading.q
-            if cfg.press_while_settling:  # then hold where it is with the full torque
-                q_ref[k] = q[k] + cfg.hold_bias
-                q = ctl.hold(q_ref)
         else:
             q = ctl.hold(q_ref)
         reasons.append(reason)

@@ -40,14 +40,19 @@ from explore3d.geometry.directions import (
     table_wrap_poses,
 )
 from explore3d.reconstruction.estimators import single_centre
-from explore3d.reconstruction.freespace import swept_area
+from explore3d.reconstruction.freespace import is_free, swept_area
 from explore3d.robot.interface import ForwardingRobot, RecordingRobot
 from explore3d.robot.sensing import SensorConfig
 from explore3d.strategy.active import ProbeConfig, finger_poses, probe_poses, surface_stake, unsupported_targets
 from explore3d.strategy.encircle import Attempt, ControlConfig, CurlBack, StopReason, run_wrap
 from explore3d.strategy.motion import DEFAULT_MIN_SEGMENTS, contact_segments, moved_after
+from explore3d.strategy.poke import PokePose, poke_poses, run_poke
 
 log = logging.getLogger(__name__)
+
+#: Poke targets considered per poke wanted (:attr:`ProbeConfig.pokes`): a target in a crease of the
+#: estimate narrower than the tip gets no poke (:func:`~explore3d.strategy.poke.poke_poses`).
+POKE_CANDIDATES = 4
 
 
 @dataclass(frozen=True)
@@ -376,14 +381,13 @@ def _run_one(args):
 def _wrap_in(world, args):
     """One wrap in the :class:`~explore3d.robot.interface.Workcell` ``world`` (the exploration sees
     its robot interface only)."""
-    index, T, band, config, bound, floor_z = args
+    index, pose, band, config, bound, floor_z = args
     spec = world.spec
     steps0 = world.steps
     robot = world.robot(config.sensors, wrap=index)
     rec = RecordingRobot(robot) if config.record else robot
     angles = AngleRecorder(rec) if config.free_space else rec
-    atts = run_wrap(angles, T, band, attempts=config.attempts, base_step=config.base_step, cfg=config.control,
-                    record=config.record, curl=config.curl_back, floor_z=floor_z)
+    atts = run_pose(angles, pose, band, config, config.record, floor_z)
     gravity = robot.gravity
     steps, log = world.steps - steps0, (rec.log() if config.record else None)
     # the contacts from the settled readings alone (the robot's own data, its model and gravity)
@@ -392,6 +396,18 @@ def _wrap_in(world, args):
     swept = ([swept_area(spec, np.array(qs), Tb, bound[0], bound[1]) for Tb, qs in angles.motions]
              if config.free_space else [])
     return atts, steps, log, contacts, swept
+
+
+def run_pose(robot, pose: WrapPose, band: ContactBand, config: ExploreConfig, record: bool = False,
+             floor_z: float | None = None) -> list[Attempt]:
+    """The attempts of one wrap pose on ``robot``: a :class:`~explore3d.strategy.poke.PokePose`'s
+    poke (:func:`~explore3d.strategy.poke.run_poke`), else the wrap
+    (:func:`~explore3d.strategy.encircle.run_wrap`) as ``config`` says; ``floor_z``: see
+    :func:`~explore3d.strategy.encircle.run_attempt`."""
+    if isinstance(pose, PokePose):
+        return [run_poke(robot, pose.T_world_base, pose.q0, pose.stop_rad, band, config.control, record)]
+    return run_wrap(robot, pose.T_world_base, band, attempts=config.attempts, base_step=config.base_step,
+                    cfg=config.control, record=record, curl=config.curl_back, floor_z=floor_z)
 
 
 def attempt_points(spec: ArmSpec, attempt: Attempt, config: ExploreConfig) -> np.ndarray:
@@ -503,7 +519,8 @@ def current_estimate(spec, config, centre, radius, poses, results):
     return single_centre(used.points, used.wrap, centre, radius, swept, a=DEFAULT_A), used.points
 
 
-def _probe_rounds(spec, config, centre, radius, poses, results, run_poses, keep=None, planning=None) -> list[dict]:
+def _probe_rounds(spec, config, centre, radius, poses, results, run_poses, keep=None, planning=None,
+                  floor_z: float | None = None) -> list[dict]:
     """Rounds of probes (:mod:`explore3d.strategy.active`): wraps through the surface where the estimate
     could still be most wrong, until its volume at stake falls below ``stop_stake`` of its volume, a
     round changes its volume by less than ``min_change``, no target is left or the rounds are spent.
@@ -513,6 +530,7 @@ def _probe_rounds(spec, config, centre, radius, poses, results, run_poses, keep=
     excl = spec.link_height if pc.exclusion_m is None else pc.exclusion_m
     rounds, previous, volume = [], np.zeros((0, 3)), None
     previous_fingers = np.zeros((0, 3))
+    previous_pokes = np.zeros((0, 3))
     for k in range(pc.rounds):
         t0 = time.perf_counter()
         if planning is not None:
@@ -544,6 +562,15 @@ def _probe_rounds(spec, config, centre, radius, poses, results, run_poses, keep=
             previous_fingers = np.vstack([previous_fingers, ft])
         if keep is not None:  # a table: only the probes whose start clears it
             new = [p for p in new if keep(p.T_world_base)]
+        if pc.pokes:
+            # four candidates per poke, in the order of rank: many targets lie in creases no poke fits
+            pt, pn, pd = unsupported_targets(est, pts, d_min, excl, POKE_CANDIDATES * pc.pokes, previous_pokes,
+                                             pc.samples, seed=k, rank=pc.rank)
+            swept = [a for r in results for a in r[4]]
+            pokes = poke_poses(pt, pn, pd + spec.link_width, est, centre, radius, spec, floor_z=floor_z,
+                               free=(lambda P: is_free(swept, P)) if swept else None, label=f"poke r{k}")[:pc.pokes]
+            new += pokes
+            previous_pokes = np.vstack([previous_pokes, *[p.target[None] for p in pokes]])
         poses.extend(new)
         run_poses(new)
         previous = np.vstack([previous, targets])
@@ -662,7 +689,7 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
             progress(len(results), len(poses))
 
     def task(i, p):
-        return (i, p.T_world_base, band, config, (centre, radius), floor_z)
+        return (i, p, band, config, (centre, radius), floor_z)
 
     check_interrupt()  # a Ctrl-C some import or C call swallowed: no wraps
     with runner:
@@ -713,7 +740,7 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
 
             rounds = _probe_rounds(spec, config, centre, radius, poses, results, run_probes,
                                    keep=None if floor_z is None else (lambda T: pose_clears(spec, T, floor_z)),
-                                   planning=planning if phased else None)
+                                   planning=planning if phased else None, floor_z=floor_z)
     return exploration_from_wraps(spec, config, band, centre, radius, poses, results, table_z, t0, band_s,
                                   rounds, moved, redone)
 

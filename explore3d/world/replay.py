@@ -15,7 +15,7 @@ import numpy as np
 
 from explore3d.geometry.sdf import SignedDistance
 from explore3d.robot.interface import ForwardingRobot, JointCommand, JointReading, Robot
-from explore3d.strategy.encircle import run_wrap
+from explore3d.strategy.explore import run_pose
 from explore3d.world.sim import ArmSimulation
 
 __all__ = ["FalseDetectionDiagnosis", "WrapReplay", "diagnose_false_detections", "replay_wrap"]
@@ -99,8 +99,7 @@ def replay_wrap(exploration, mesh, wrap: int) -> WrapReplay:
         robot = world.robot(cfg.sensors)
         robot.reseed((0, wrap))  # as explore() seeds the wrap
         obs = _ContactObservingRobot(world, robot)
-        atts = run_wrap(obs, exploration.poses[wrap].T_world_base, exploration.band, attempts=cfg.attempts,
-                        base_step=cfg.base_step, cfg=cfg.control, record=True, curl=cfg.curl_back)
+        atts = run_pose(obs, exploration.poses[wrap], exploration.band, cfg, record=True)
     log, starts = obs.log, obs.starts
     rec = exploration.attempts[wrap]
     identical = len(atts) == len(rec) and all(

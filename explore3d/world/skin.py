@@ -23,7 +23,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from explore3d.robot.interface import ForwardingRobot, JointCommand, JointReading, Robot
-from explore3d.strategy.encircle import run_wrap
+from explore3d.strategy.explore import run_pose
 from explore3d.world.sim import ArmSimulation
 
 __all__ = ["LOADED_FORCE_N", "SkinContacts", "ideal_skin", "surface_coverage", "COVERAGE_RADII_M"]
@@ -124,8 +124,7 @@ def ideal_skin(exploration, mesh) -> SkinContacts:
             robot = world.robot(cfg.sensors)
             robot.reseed((0, wi))  # as explore() seeds the wrap
             skin = _SkinRobot(world, robot, _wanted_steps(atts, cfg.sensors.delay_steps))
-            again = run_wrap(skin, pose.T_world_base, exploration.band, attempts=cfg.attempts,
-                             base_step=cfg.base_step, cfg=cfg.control, curl=cfg.curl_back)
+            again = run_pose(skin, pose, exploration.band, cfg)
         if len(again) != len(atts) or not all(np.array_equal(a.q, b.q) for a, b in zip(again, atts)):
             raise RuntimeError(f"wrap {wi}: the re-run did not reproduce the recorded attempts; the ideal "
                                "skin needs the exploration's own mesh, arm and configuration")
