@@ -1,5 +1,5 @@
-"""Tip probing (explore3d.strategy.poke): the hook's geometry, where pokes start, and a poke onto a
-known face localised on the tip."""
+"""Tip probing (explore3d.strategy.poke): the hook's geometry, where pokes start, a poke onto a
+known face localised on the tip, and the tip following that face."""
 import math
 
 import numpy as np
@@ -10,7 +10,7 @@ from explore3d import load_arm
 from explore3d.arm.kinematics import link_transforms
 from explore3d.arm.spec import ArmSpec
 from explore3d.core.settings import SimConfig
-from explore3d.feeling.contacts import localise_attempts
+from explore3d.feeling.contacts import MAX_UNCERTAINTY_M, contact_uncertainty_m, localise_attempts
 from explore3d.robot.sensing import SensorConfig
 from explore3d.strategy.active import ProbeConfig
 from explore3d.strategy.encircle import ControlConfig
@@ -103,6 +103,29 @@ def test_a_tip_poke_onto_a_flat_face_is_localised_on_the_tip_within_a_millimetre
     assert cs.force_n[0] > 0.3
 
 
-def test_probe_config_rejects_negative_pokes():
+def test_contour_following_lays_a_line_of_contacts_on_a_flat_face():
+    """After the poke's touch on the cube's top face the tip slides 3 steps of 3 mm each way: the
+    readings give contacts on the tip, every one within 1 mm of the face and placed within the
+    hull's 0.5 mm, a few millimetres apart along the surface across at least 5 mm."""
+    cube = trimesh.creation.box((0.08, 0.08, 0.08))
+    est = trimesh.creation.box((0.1, 0.1, 0.1))
+    (pose,) = poke_poses([[0.005, -0.01, 0.05]], [[0.0, 0.0, 1.0]], [0.03], est, np.zeros(3), 0.09, SPEC)
+    band = cached_band(SPEC, ControlConfig(), SimConfig(), SensorConfig(), False)
+    with ArmSimulation(SPEC, cube.vertices, cube.faces, SimConfig()) as world:
+        robot = world.robot(SensorConfig())
+        robot.reseed((0, 0))
+        att = run_poke(robot, pose.T_world_base, pose.q0, pose.stop_rad, band, slides=3)
+    assert len(att.moments) >= 4 and all(m.still for m in att.moments)
+    cs = localise_attempts(SPEC, [att], GRAVITY, SensorConfig())
+    assert len(cs) == len(att.moments) and (cs.link == SPEC.n_links - 1).all()
+    assert np.abs(cs.points[:, 2] - 0.04).max() < 1e-3
+    assert contact_uncertainty_m(cs, cs.sigma_nm).max() <= MAX_UNCERTAINTY_M
+    along = np.sort(cs.points @ np.cross(pose.normal, [0.0, 0.0, 1.0]))  # across the face, in the arm's plane
+    assert along[-1] - along[0] >= 0.005 and np.diff(along).max() <= 0.004
+
+
+def test_probe_config_rejects_negative_pokes_and_slides_without_pokes():
     with pytest.raises(ValueError, match="pokes"):
         ProbeConfig(pokes=-1)
+    with pytest.raises(ValueError, match="slides"):
+        ProbeConfig(slides=2)

@@ -167,6 +167,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--pokes", type=RUN_OPTIONS["pokes"], metavar="N",
                    help="3d: tip pokes per round of probes: the tip, the distal links bent into a hook, brought "
                         "along the estimate's inward normal onto unsupported surface (default 0: none)")
+    r.add_argument("--slides", type=RUN_OPTIONS["slides"], metavar="N",
+                   help="3d: contour following after each poke's touch: the tip slides N steps of 3 mm each way "
+                        "along the surface, a contact read at each (default 0: none; needs --pokes)")
     r.add_argument("--probe-rank", dest="probe_rank", type=RUN_OPTIONS["probe_rank"],
                    help="3d: how probe targets are chosen: stake (default: the most volume the estimate could still "
                         "have wrong, area x distance to the nearest contact) or distance (the farthest from every "
@@ -273,6 +276,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="3d: finger probes per round of probes (default 12; 0: none)")
     k.add_argument("--pokes", type=RUN_OPTIONS["pokes"], metavar="N",
                    help="3d: tip pokes per round of probes (default 0: none)")
+    k.add_argument("--slides", type=RUN_OPTIONS["slides"], metavar="N",
+                   help="3d: contour-following steps each way after each poke (default 0: none)")
     k.add_argument("--encircle", type=RUN_OPTIONS["encircle"], help="straight (default) or curl-back")
     k.add_argument("--no-free-space", dest="no_free_space", action="store_true",
                    help="3d: neither record the swept space nor carve with it (the paper's hull of the straight "
@@ -792,7 +797,7 @@ def cmd_evaluate(args) -> int:
 def cmd_compare(args) -> int:
     _check_object_name(args.object)
     opts = {k: getattr(args, k) for k in ("mode", "directions", "attempts", "angles", "jobs", "probes", "fingers",
-                                          "pokes", "encircle")
+                                          "pokes", "slides", "encircle")
             if getattr(args, k) is not None}
     config = explore_config({**opts, "probes": 0} if args.no_free_space else opts)
     if args.no_free_space:

@@ -178,6 +178,8 @@ RUN_OPTIONS = {
     "fingers": _int_min("--fingers", 0),
     # tip pokes per round: the tip brought along the estimate's inward normal onto unsupported surface
     "pokes": _int_min("--pokes", 0),
+    # contour following: steps of 3 mm the tip slides each way after each poke's touch
+    "slides": _int_min("--slides", 0),
     # how probe targets are ranked: the most volume at stake (area x distance to a contact) or the farthest
     # from every contact beyond a link length (the rule before issue 24)
     "probe_rank": _choice("probe_rank", ("stake", "distance")),
@@ -285,7 +287,7 @@ def explore_config(opts: dict):
             kw["sensors"] = dataclasses.replace(kw.get("sensors", SensorConfig()), seed=opts["noise_seed"])
         if opts.get("collision_margin") is not None:
             kw["sim"] = SimConfig(collision_margin=opts["collision_margin"])
-        if any(opts.get(k) is not None for k in ("probes", "fingers", "pokes", "probe_rank")):
+        if any(opts.get(k) is not None for k in ("probes", "fingers", "pokes", "slides", "probe_rank")):
             probes = ProbeConfig() if opts.get("probes") is None else ProbeConfig(rounds=opts["probes"])
             if opts.get("probe_rank") == "distance":  # the former rule whole: its one-link floor too
                 probes = dataclasses.replace(probes, rank="distance", min_distance_m=None)
@@ -299,6 +301,10 @@ def explore_config(opts: dict):
                     raise ValueError("--pokes places tip pokes in the rounds of probes: give --probes >= 1 "
                                      "(or leave --probes at its default)")
                 probes = dataclasses.replace(probes, pokes=opts["pokes"])
+            if opts.get("slides") is not None:
+                if opts["slides"] and not probes.pokes:
+                    raise ValueError("--slides follows the tip after each poke: give --pokes >= 1")
+                probes = dataclasses.replace(probes, slides=opts["slides"])
             kw["probes"] = probes if probes.rounds else None
         if opts.get("encircle") == "curl-back":
             kw["curl_back"] = CurlBack()
@@ -312,4 +318,4 @@ def explore_config(opts: dict):
 #: Settings a sweep's grid may sweep (explore3d.app.sweep), each an option of ``explore3d run`` (see ``explore3d run --help``).
 SWEEP_KEYS = ("a", "angles", "arm", "attempts", "base_step", "clearance", "collision_margin", "directions",
               "encircle", "face_offset", "fingers", "grasp", "method", "mirrored", "mode", "n_along", "n_height", "noise_seed", "offsets",
-              "points", "pokes", "probe_rank", "probes", "scene", "seed", "sensing", "size")
+              "points", "pokes", "probe_rank", "probes", "scene", "seed", "sensing", "size", "slides")

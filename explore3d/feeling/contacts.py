@@ -24,7 +24,7 @@ import trimesh
 from explore3d.arm.kinematics import link_transforms
 from explore3d.arm.selfcontact import near_other_body
 from explore3d.arm.spec import ArmSpec
-from explore3d.feeling.localise import TIP_EXTRA, Localisation, external_torques, localise
+from explore3d.feeling.localise import CHI2_GAIN, TIP_EXTRA, Localisation, external_torques, localise
 from explore3d.reconstruction.hull_input import reconstruct_points
 from explore3d.robot.sensing import SensorConfig
 
@@ -138,13 +138,32 @@ class ContactSet:
         return ContactSet(*(getattr(self, f)[mask] for f in self.__dataclass_fields__))
 
 
-def localise_moment(spec: ArmSpec, moment, T_world_base, gravity, sensors: SensorConfig) -> Localisation:
+def localise_moment(spec: ArmSpec, moment, T_world_base, gravity, sensors: SensorConfig,
+                    poke: bool = False) -> Localisation:
     """The contacts at one settled reading (:class:`explore3d.strategy.encircle.Moment`), base pose
-    ``T_world_base`` (4, 4), ``gravity`` (3,) m/s^2 (world), with the sensing's uncertainties."""
+    ``T_world_base`` (4, 4), ``gravity`` (3,) m/s^2 (world), with the sensing's uncertainties.
+
+    ``poke``: the reading of a tip poke (:mod:`explore3d.strategy.poke`), whose tip leads and whose
+    other links trail behind it.  A force along the tip link passes through the tip's own joint, so
+    the torques cannot tell a touch on the tip's distal face from one on the inner corner of the
+    link before it, on the same line 20 mm back (measured: 3 of 51 readings of a tip sliding on a
+    cube's face were placed there, 18 mm off the face).  When the tip alone explains the torques
+    as well (within the significance threshold ``chi2_gain * sigma^2`` of the best fit), the tip it is.
+    """
     r = moment.reading
     tau_ext = external_torques(spec, r.q, r.tau, T_world_base, gravity)
-    return localise(spec, r.q, tau_ext, T_world_base, sigma_nm=torque_sigma_nm(sensors, moment.readings),
-                    position_sigma_m=position_sigma_m(spec, sensors))
+    kw = dict(sigma_nm=torque_sigma_nm(sensors, moment.readings), position_sigma_m=position_sigma_m(spec, sensors))
+    loc = localise(spec, r.q, tau_ext, T_world_base, **kw)
+    tip = spec.n_links - 1
+    if poke and loc.contacts and all(c.link != tip for c in loc.contacts):
+        alt = localise(spec, r.q, tau_ext, T_world_base, links=(tip,), **kw)
+        if alt.contacts and alt.rss <= loc.rss + CHI2_GAIN * kw["sigma_nm"] ** 2:
+            loc = alt
+    if poke:  # the tip's distal face lies at x = L: that is its profile interval
+        loc = dataclasses.replace(loc, contacts=tuple(
+            dataclasses.replace(c, along_interval_m=(spec.link_length, spec.link_length))
+            if c.link == tip and c.kind in TIP_EXTRA else c for c in loc.contacts))
+    return loc
 
 
 #: Points sampled along a contact's profile interval when testing it against the arm's other bodies.
@@ -182,21 +201,18 @@ def localise_attempts(spec: ArmSpec, attempts, gravity, sensors: SensorConfig, w
     """Localise every moment of one wrap's ``attempts`` (see :func:`localise_moment`); ``wrap``
     labels them.  Contacts that lie on the arm itself are marked (:attr:`ContactSet.self_contact`).
 
-    A tip poke's contact on the tip's distal face or its outer distal corner (an attempt with
-    ``poke`` set) lies at the link's distal end, x = L: its profile interval is that point.  The
-    hook puts the joints off the force's line, so the torques place it (across the face, to the
-    fit's sigma); on a straight chain they cannot, and such contacts keep no interval (infinitely
-    uncertain, :func:`contact_uncertainty_m`)."""
+    A tip poke's moments (an attempt with ``poke`` set) are localised as such
+    (:func:`localise_moment`): a contact on the tip's distal face or its outer distal corner lies
+    at the link's distal end, x = L, its profile interval that point.  The hook puts the joints
+    off the force's line, so the torques place it (across the face, to the fit's sigma); on a
+    straight chain they cannot, and such contacts keep no interval (infinitely uncertain,
+    :func:`contact_uncertainty_m`)."""
     rows = []
     for ai, att in enumerate(attempts):
         for m in att.moments:
-            loc = localise_moment(spec, m, att.T_world_base, gravity, sensors)
+            loc = localise_moment(spec, m, att.T_world_base, gravity, sensors, poke=getattr(att, "poke", False))
             if not loc.contacts:
                 continue
-            if getattr(att, "poke", False):
-                loc = dataclasses.replace(loc, contacts=tuple(
-                    dataclasses.replace(c, along_interval_m=(spec.link_length, spec.link_length))
-                    if c.link == spec.n_links - 1 and c.kind in TIP_EXTRA else c for c in loc.contacts))
             on_arm = on_the_arm(spec, m.reading.q, att.T_world_base, loc.contacts)
             for c, s in zip(loc.contacts, on_arm):
                 rows.append((c, ai, m, loc.residual_nm, bool(s), loc.sigma_nm))

@@ -48,8 +48,12 @@ from scipy.optimize import nnls
 from explore3d.arm.kinematics import gravity_torques, link_transforms
 from explore3d.arm.spec import ArmSpec
 
-__all__ = ["LocalContact", "Localisation", "localise", "external_torques", "link_outline", "KINDS", "INNER_SIDE", "INNER_SIDE_ROUNDED", "TIP_EXTRA", "inverse_dynamics",
+__all__ = ["LocalContact", "Localisation", "localise", "external_torques", "link_outline", "KINDS", "INNER_SIDE", "INNER_SIDE_ROUNDED", "TIP_EXTRA", "CHI2_GAIN", "inverse_dynamics",
            "torques_of_contacts"]
+
+#: The default significance gain: a contact is kept when it lowers the residual sum of squares by at
+#: least this many torque variances (:func:`localise`).
+CHI2_GAIN = 25.0
 
 #: Candidate kinds on a link's in-plane outline: four faces, four corners.
 KINDS = ("inner", "outer", "distal", "proximal", "corner_di", "corner_do", "corner_pi", "corner_po")
@@ -253,9 +257,10 @@ def _fit_module(cols: list, tau: np.ndarray, fmax: float = MAX_FORCE_N, ridge: f
     return x, float(rnorm * rnorm)
 
 
-def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0e-3, chi2_gain: float = 25.0,
+def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0e-3, chi2_gain: float = CHI2_GAIN,
              max_contacts: int | None = None, kinds=None, swap_passes: int = 2,
-             force_scale_n: float | None = 20.0, profile_chi2: float = 4.0, position_sigma_m: float = 0.0) -> Localisation:
+             force_scale_n: float | None = 20.0, profile_chi2: float = 4.0, position_sigma_m: float = 0.0,
+             links=None) -> Localisation:
     """Localise the contacts at one quasi-static moment.
 
     Args:
@@ -278,6 +283,7 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
         kinds: the candidate kinds considered (None: :data:`INNER_SIDE_ROUNDED`; with it or
             :data:`INNER_SIDE` the tip's distal face and outer distal corner are added;
             :data:`KINDS` for every face and corner).
+        links: the links a contact may lie on (None: every link).
 
     Returns:
         a :class:`Localisation`.
@@ -309,6 +315,8 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
     cand = [(i, k) for i in range(top + 1) for k in kinds]
     if tuple(kinds) in (INNER_SIDE, INNER_SIDE_ROUNDED) and top == n - 1:
         cand += [(n - 1, k) for k in TIP_EXTRA]
+    if links is not None:
+        cand = [c for c in cand if c[0] in set(links)]
     cap = n if max_contacts is None else max_contacts
 
     def rss_of(cs):

@@ -72,6 +72,9 @@ class ProbeConfig:
             (chosen like the wraps' but apart from earlier pokes' targets; 0, default: none): the
             tip brought along the estimate's inward normal onto the target and up to the target's
             distance from every contact plus a link width past it.
+        slides: after each poke's touch the tip follows the surface this many steps of 3 mm each
+            way (:func:`explore3d.strategy.poke.slide_tip`: contour following, a moment read at
+            each step; 0, default: none).
     """
 
     rounds: int = 3
@@ -86,6 +89,7 @@ class ProbeConfig:
     samples: int = 4000
     fingers: int = 12
     pokes: int = 0
+    slides: int = 0
 
     def __post_init__(self):
         for name, lo in (("rounds", 0), ("targets", 1), ("orientations", 1), ("samples", 10)):
@@ -102,6 +106,10 @@ class ProbeConfig:
             raise ValueError(f"ProbeConfig.across must be True or False; got {self.across!r}")
         check_field(self, "fingers", 0, integer=True)
         check_field(self, "pokes", 0, integer=True)
+        check_field(self, "slides", 0, integer=True)
+        if self.slides and not self.pokes:
+            raise ValueError(f"ProbeConfig.slides follows the tip after each poke: set pokes >= 1 (got pokes=0, "
+                             f"slides={self.slides})")
 
 
 def surface_stake(mesh, contacts, samples: int = 4000, seed: int = 0):

@@ -405,7 +405,8 @@ def run_pose(robot, pose: WrapPose, band: ContactBand, config: ExploreConfig, re
     (:func:`~explore3d.strategy.encircle.run_wrap`) as ``config`` says; ``floor_z``: see
     :func:`~explore3d.strategy.encircle.run_attempt`."""
     if isinstance(pose, PokePose):
-        return [run_poke(robot, pose.T_world_base, pose.q0, pose.stop_rad, band, config.control, record)]
+        slides = config.probes.slides if config.probes is not None else 0
+        return [run_poke(robot, pose.T_world_base, pose.q0, pose.stop_rad, band, config.control, record, slides=slides)]
     return run_wrap(robot, pose.T_world_base, band, attempts=config.attempts, base_step=config.base_step,
                     cfg=config.control, record=record, curl=config.curl_back, floor_z=floor_z)
 

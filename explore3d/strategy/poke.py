@@ -41,6 +41,7 @@ from explore3d.strategy.encircle import (
     Attempt,
     ControlConfig,
     Controller,
+    Moment,
     StopReason,
     carried_force,
     settle_touch,
@@ -76,6 +77,10 @@ POKE_AVERAGE_STEPS = 25
 #: 35 of 36 placed within 1 mm, still).
 POKE_CREEP_M = 0.001
 POKE_PRESS_STEPS = 6
+
+#: Contour following (:func:`slide_tip`): the tip's end moves this far across the surface between
+#: readings, m.
+SLIDE_STEP_M = 0.003
 
 #: The tip's speed along its axis while it pokes, m/s (the wraps' links sweep at up to
 #: :attr:`~explore3d.strategy.encircle.ControlConfig.tip_speed`, 0.3 m/s): end-on, the chain does not bend
@@ -237,14 +242,59 @@ def poke_poses(targets, normals, depths, estimate, centre, radius: float, spec: 
     return out
 
 
+def slide_tip(ctl: Controller, q_ref: np.ndarray, push_nm: float, radius_m: float, steps: int,
+              step_m: float = SLIDE_STEP_M) -> list:
+    """Contour following with the tip (issue 24, item 3), after a poke's touch: the base joint keeps
+    pushing the tip onto the surface with its torque limit ``push_nm`` N m (its reference
+    :data:`POKE_CREEP_M` ahead of where it stands, over the hook's radius ``radius_m``), and the tip
+    joint turns so the tip's end slides across the surface, ``step_m`` at a time (its angle over
+    the link length), ``steps`` steps one way, back, and ``steps`` the other way; after each step the
+    arm settles and a moment is read (the mean of :data:`POKE_AVERAGE_STEPS` still readings).  A
+    direction ends early when the arm does not settle or the tip no longer presses with
+    :data:`POKE_FORCE_N` (it slid off an edge).  ``q_ref`` (n,) rad changes in place.  Returns the
+    :class:`~explore3d.strategy.encircle.Moment` list, each localised like any touch."""
+    spec, cfg = ctl.spec, ctl.cfg
+    j = spec.n_links - 1
+    limits = ctl.full.copy()
+    limits[0] = push_nm
+    centre = float(q_ref[j])
+    out = []
+
+    def go(angle):  # turn the tip joint there on a short ramp, pushing all the while
+        a0 = float(q_ref[j])
+        n_ramp = max(1, int(math.ceil(abs(angle - a0) * spec.link_length / (POKE_TIP_SPEED_M_S * ctl.robot.dt))))
+        for i in range(1, n_ramp + 1):
+            q_ref[j] = a0 + (angle - a0) * i / n_ramp
+            q_ref[0] = ctl.reading.q[0] + POKE_CREEP_M / radius_m
+            ctl.send(q_ref, None, limits)
+        q_ref[0] = ctl.reading.q[0] + POKE_CREEP_M / radius_m
+        return ctl.settle(q_ref, limits)[0]
+
+    for sign in (1.0, -1.0):
+        for i in range(1, steps + 1):
+            angle = centre + sign * i * step_m / spec.link_length
+            if not spec.joint_lower <= angle <= spec.joint_upper or not go(angle):
+                break
+            reading = ctl.average(q_ref, limits, cfg.average_steps)
+            if carried_force(spec, reading, 0, ctl.T, ctl.robot.gravity)[0] < POKE_FORCE_N:
+                break
+            out.append(Moment(joint=0, step=ctl.steps, still=True, reading=reading, readings=cfg.average_steps))
+        go(centre)
+    q_ref[0] = ctl.reading.q[0] + cfg.hold_bias
+    ctl.hold(q_ref)
+    return out
+
+
 def run_poke(robot: Robot, T_world_base, q0, stop_rad: float, band: ContactBand | None,
              cfg: ControlConfig = ControlConfig(), record: bool = False,
-             tip_speed_m_s: float = POKE_TIP_SPEED_M_S) -> Attempt:
+             tip_speed_m_s: float = POKE_TIP_SPEED_M_S, slides: int = 0, slide_step_m: float = SLIDE_STEP_M) -> Attempt:
     """One poke: start in the hook ``q0`` (n,) rad at the base pose ``T_world_base`` (4, 4), sweep the
     base joint towards ``stop_rad`` rad with its sweep speed and torque limit until the detector
     fires (``band``; None: never), then settle and read the touch as a wrap does
     (:func:`~explore3d.strategy.encircle.settle_touch`), creeping the reference on until the tip
-    presses with :data:`POKE_FORCE_N`; the moment is the mean of :data:`POKE_AVERAGE_STEPS` readings.  Returns an
+    presses with :data:`POKE_FORCE_N`; the moment is the mean of :data:`POKE_AVERAGE_STEPS` readings.
+    With ``slides`` > 0 the tip then follows the surface (:func:`slide_tip`) ``slides`` steps of
+    ``slide_step_m`` each way from the touch, a moment read at each.  Returns an
     :class:`~explore3d.strategy.encircle.Attempt` whose only sweep is the base joint's."""
     spec: ArmSpec = robot.spec
     n = spec.n_links
@@ -272,6 +322,8 @@ def run_poke(robot: Robot, T_world_base, q0, stop_rad: float, band: ContactBand 
             q_ref[0] = ctl.reading.q[0] + (i + 1) * POKE_CREEP_M / R
             moment = settle_touch(ctl, 0, q_ref, torques[0], contact)
         moments.append(moment)
+        if slides and moment.still:
+            moments += slide_tip(ctl, q_ref, torques[0], R, slides, slide_step_m)
     else:
         ctl.hold(q_ref)
     detect_step = np.full(n, ctl.steps, dtype=int)
