@@ -129,3 +129,31 @@ def test_probe_config_rejects_negative_pokes_and_slides_without_pokes():
         ProbeConfig(pokes=-1)
     with pytest.raises(ValueError, match="slides"):
         ProbeConfig(slides=2)
+
+
+def test_pokes_and_their_contours_replay_from_the_logs():
+    """A small exploration with a round of pokes that follow the surface, recorded: the loop rerun
+    on its logs (no simulator) plans the same pokes and finds the same contacts; read with no
+    controller, the pokes' motions are recognised as pokes (they start bent)."""
+    from explore3d.robot.interface import LogWorkcell
+    from explore3d.strategy.explore import ExploreConfig, explore_robots, rough_bound
+    from explore3d.strategy.poke import PokePose
+    from explore3d.strategy.readings import exploration_from_readings
+    from explore3d.world.explore import explore
+    from explore3d.world.objects import cube
+
+    spec = ArmSpec(name="small16", n_links=16, link_length=0.02)
+    m = cube()
+    cfg = ExploreConfig(directions=8, angles=1, jobs=1, record=True,
+                        probes=ProbeConfig(rounds=1, targets=1, orientations=1, across=False, fingers=0, pokes=2,
+                                           slides=1))
+    ex = explore(m, spec, cfg)
+    pokes = [i for i, p in enumerate(ex.poses) if isinstance(p, PokePose)]
+    assert pokes and all(ex.attempts[i][0].poke for i in pokes)
+    assert any(len(ex.attempts[i][0].moments) > 1 for i in pokes)  # a contour read more than the touch
+    c, r = rough_bound(m.vertices)
+    again = explore_robots(LogWorkcell(ex.logs), spec, cfg, ex.band, c, r)
+    assert [p.label for p in again.poses] == [p.label for p in ex.poses]
+    assert np.array_equal(again.contacts.points, ex.contacts.points) and np.array_equal(again.points, ex.points)
+    read = exploration_from_readings(ex.logs, spec, cfg, ex.band, c, r)
+    assert [a[0].poke for a in read.attempts] == [a[0].poke for a in ex.attempts]

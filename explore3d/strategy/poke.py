@@ -1,26 +1,34 @@
 """Tip probing (issue 24, item 2): the tip brought along the estimate's inward normal onto a target.
 
-A straight chain cannot feel a force along itself: every joint lies on the force's line, so no
-joint torque shows it.  A *hook* bends the distal links (the last :data:`HOOK_JOINTS` joints,
-evenly) so that the tip link lies across the radius from the base joint to the tip
-(:func:`hook_angles`): turning the base joint then moves the tip along its own axis, and a force
-on the tip's distal face has the whole reach as its lever about the base joint -- the base
-joint's sweep detects it as it detects any touch -- and lever arms about the joints of the bent
-part (the joint before the tip, one link length times the sine of its bend, 10 mm for the
-default arm's 30 degrees: with the default torque noise of about 1 mN m a 0.1 N push there is
-ten standard deviations) that place it on the distal face (:func:`explore3d.feeling.localise.localise`
-adds the tip's distal face to its candidates).
+A straight chain cannot feel a force along itself: each joint sees the force times its distance
+from the force's line, and every joint lies on it.  A *hook* bends the distal links (the last
+:data:`HOOK_JOINTS` joints, evenly) so that the tip link lies across the radius from the base joint
+to the tip (:func:`hook_angles`): turning the base joint then moves the tip along its own axis,
+and a force on the tip's distal face has the whole reach (0.45 m for the default arm) as its
+lever about the base joint -- the base joint's sweep detects it by its lag, as any touch -- and
+one link length times the sine of the bend (10 mm at the default arm's 32 degrees) about the joint
+before the tip.  How far from straight is enough: at the default sensing a joint's torque is
+significant from five standard deviations, 5 mN m for one reading and 1 mN m for the mean of
+:data:`POKE_AVERAGE_STEPS` (the model's floor), so at the :data:`POKE_FORCE_N` press the tip's axis
+must pass at least 13 mm (one reading) or 2.6 mm (the mean) from a joint for that joint to see
+the touch: a bend of 8 degrees at the joint before the tip, with the mean.  The torques place the
+force's line across the tip's face to the noise over the force; along the line the touch is on
+the tip's distal face (:func:`explore3d.feeling.localise.localise` adds it to its candidates) --
+or on the inner corner of the link before it, on the same line through the tip's joint, which no
+bend separates (:func:`explore3d.feeling.contacts.localise_moment` takes the tip, which leads).
 
 A poke (:func:`poke_poses`, :func:`run_poke`): for a target on the estimate's surface with outward
 normal ``n``, a plane containing ``n``; the base placed so the tip, turning about the base joint,
 passes the target moving along ``-n``; the arm starting in the hook 10, 20 or 40 mm before the
-target (by the arc: the nearest whose start the estimate leaves empty); the base joint sweeping towards the target and on, ``depth_m`` beyond it
-(the volume at stake there: the estimate may bridge a fold that deep), until the detector fires;
-the touch then settled and read as a wrap's touch is.  Of the planes about ``n`` the one is taken
-whose arm, with the tip at the target, keeps clearest of the estimate (the tip link aside); a
-target where every plane's arm would start inside the estimate (outside the space the wraps
-swept, proven empty), or the base inside the rough bound, gets no poke.  Pure geometry on what the robot believes (its model, the
-estimate, the rough bound); the motion sees the :class:`~explore3d.robot.interface.Robot` only.
+target (by the arc: the nearest whose start the estimate leaves empty); the base joint sweeping
+towards the target and on, ``depth`` beyond it (the volume at stake there: the estimate may bridge
+a fold that deep), until the detector fires; the touch then settled and read as a wrap's touch
+is, pressed on until it can be placed.  Of the planes about ``n`` the one is taken whose arm, with
+the tip at the target, keeps clearest of the estimate (the tip link aside); a target where every
+plane's arm would start inside the estimate (outside the space the wraps swept, proven empty),
+or the base inside the rough bound, gets no poke.  Pure geometry on what the robot believes (its
+model, the estimate, the rough bound); the motion sees the
+:class:`~explore3d.robot.interface.Robot` only.
 """
 from __future__ import annotations
 
@@ -95,13 +103,13 @@ class PokePose(WrapPose):
 
     Attributes:
         q0: (n,) the hook the arm starts in, rad (:func:`hook_angles`).
-        stop_rad: the base joint's stop angle, rad: the tip ``depth_m`` past the target.
+        stop_rad: the base joint's stop angle, rad: the tip as far past the target as its depth.
         target: (3,) the target point, world frame, m.
     """
 
-    q0: np.ndarray = None
+    q0: np.ndarray | None = None
     stop_rad: float = 0.0
-    target: np.ndarray = None
+    target: np.ndarray | None = None
 
 
 def tip_point(spec: ArmSpec, q) -> tuple[np.ndarray, float]:

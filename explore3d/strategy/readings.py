@@ -167,7 +167,11 @@ def exploration_from_readings(logs, spec: ArmSpec, config: ExploreConfig, band: 
             settle, its sensing the contacts' uncertainty, its mode and hull settings the rest);
         band: the contact band the logs are read with.
         centre, radius: the rough bound (3,) world frame, m, and m; table_z: the table height
-            (world z, m) or None."""
+            (world z, m) or None.
+
+    A motion that starts bent (a tip poke, :mod:`explore3d.strategy.poke`; wraps start straight) is
+    localised as a poke; its moment is the detection's settled reading (the poke's pressed, averaged
+    reading and a contour's readings are the controller's, which a replay reads)."""
     centre = np.asarray(centre, dtype=float)
     results, poses = [], []
     for w, log in enumerate(logs):
@@ -183,7 +187,8 @@ def exploration_from_readings(logs, spec: ArmSpec, config: ExploreConfig, band: 
             contact[[m.joint for m in moments]] = True
             attempts.append(Attempt(T_world_base=T, q=log.q[end - 1].copy(), q_ref=log.q_ref[end - 1].copy(),
                                     contact=contact, reasons=(), detect_step=np.zeros(spec.n_links, dtype=int),
-                                    steps=end - first - 1, moments=tuple(moments)))
+                                    steps=end - first - 1, moments=tuple(moments),
+                                    poke=bool(np.any(np.asarray(log.start_q[mi]) != 0))))
             if config.free_space:
                 swept.append(swept_area(spec, log.q[first:end], T, centre, radius))
         contacts = localise_attempts(spec, attempts, np.asarray(log.gravity, float), config.sensors, wrap=w)
