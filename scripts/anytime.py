@@ -4,6 +4,7 @@ EVALUATION ONLY: the truth is read after the run.
     python scripts/anytime.py --objects nonconvex --label default --out DIR/anytime.jsonl
     python scripts/anytime.py --objects bunny --label sweeps --no-probes --out DIR/anytime.jsonl
     python scripts/anytime.py --objects bunny --label floor20 --probe min_distance_m=0.02 --out DIR/anytime.jsonl
+    python scripts/anytime.py --objects nonconvex --label pokes24-seed1 --probe pokes=24 --noise-seed 1 --out DIR/anytime.jsonl
 
 Per object (a built-in name, a name of the fixed non-convex set, or the groups ``nonconvex`` and
 ``concave``) one default 3D run (ideal scene, the README's sensing, the default arm or ``--arm``; ``--probe KEY=VALUE``
@@ -73,7 +74,8 @@ def prefix_score(ex, truth, centre, radius, k: int, seed: int = 0) -> dict:
             "hulled_contacts": int(len(used.points))}
 
 
-def one(name: str, label: str, probe: dict, no_probes: bool, every: int, jobs: int, arm: str = "default") -> dict:
+def one(name: str, label: str, probe: dict, no_probes: bool, every: int, jobs: int, arm: str = "default",
+        noise_seed: int | None = None) -> dict:
     from explore3d import load_object
     from explore3d.app.pipeline import run
     from explore3d.strategy.active import ProbeConfig
@@ -83,6 +85,8 @@ def one(name: str, label: str, probe: dict, no_probes: bool, every: int, jobs: i
     mesh = load(name) if name in NONCONVEX_SET else load_object(name)
     probes = None if no_probes else dataclasses.replace(ProbeConfig(), **probe)
     config = ExploreConfig(jobs=jobs, probes=probes)
+    if noise_seed is not None:
+        config = dataclasses.replace(config, sensors=dataclasses.replace(config.sensors, seed=noise_seed))
     ends: list[float] = []
     t0 = time.perf_counter()
 
@@ -108,8 +112,9 @@ def one(name: str, label: str, probe: dict, no_probes: bool, every: int, jobs: i
     rounds = [{key: (v.tolist() if hasattr(v, "tolist") else v) for key, v in r.items()
                if key not in ("targets", "distance_m")} | {"targets": int(len(r["targets"]))}
               for r in ex.probe_rounds]
-    return {"object": name, "label": label, "arm": arm, "probe": probe, "no_probes": no_probes,
+    return {"object": name, "label": label, "arm": arm, "probe": probe, "no_probes": no_probes, "noise_seed": noise_seed,
             "percent_error": round(res.error.percent, 3), "wraps": n, "explore_s": round(ex.wall_s, 1),
+            "steps": int(ex.steps),
             "rounds": rounds, "curve": curve}
 
 
@@ -143,6 +148,8 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--arm", default="default", help="built-in arm name or a URDF (explore3d arm writes one)")
     ap.add_argument("--out", type=Path, required=True, help="JSON-lines file (appended)")
+    ap.add_argument("--noise-seed", type=int, default=None,
+                    help="the sensor noise's seed (SensorConfig.seed; default: its default): one more sample")
     args = ap.parse_args(argv)
     if args.table:
         print(table(args.out))
@@ -163,7 +170,7 @@ def main(argv=None) -> int:
     for name in names:
         if (name, args.label) in done:
             continue
-        row = one(name, args.label, probe, args.no_probes, args.every, args.jobs, args.arm)
+        row = one(name, args.label, probe, args.no_probes, args.every, args.jobs, args.arm, args.noise_seed)
         with args.out.open("a") as f:
             f.write(json.dumps(row) + "\n")
         print(json.dumps({k: row[k] for k in ("object", "label", "percent_error", "wraps", "explore_s")}),

@@ -422,10 +422,11 @@ def test_run_planar_end_to_end(tmp_path, capsys):
 # --- run is explore3d.run; every built-in object and a pybullet_data mesh ----------------------------
 
 #: Small explorations the localised contacts (the default) give a hull from: planar 3 directions x
-#: 4 attempts (the planar default), 3D 24 planes x 1 angle and one round of probes.
+#: 4 attempts (the planar default), 3D 24 planes x 1 angle and one round of probes with two finger
+#: probes and two tip pokes (the default's 12 fingers cost a test as much as the 24 planes).
+_SWEEPS_3D = ["--mode", "3d", "--directions", "24", "--offsets", "1", "--angles", "1", "--attempts", "1"]
 _FAST = {"planar": ["--mode", "planar", "--directions", "3"],
-         "3d": ["--mode", "3d", "--directions", "24", "--offsets", "1", "--angles", "1", "--attempts", "1",
-                "--probes", "1"]}
+         "3d": [*_SWEEPS_3D, "--probes", "1", "--fingers", "2", "--pokes", "2"]}
 
 
 @pytest.mark.parametrize("mode", ["planar", "3d"])
@@ -441,7 +442,8 @@ def test_cli_and_api_give_the_same_estimate(tmp_path, capsys, small_arm, mode):
                        "--a", "0.1", "--seed", "3", "--no-pictures", "-q")
     assert code == 0, err
     report = json.loads((out / "report.json").read_text())
-    kw = ({"directions": 24, "offsets": 1, "angles": 1, "attempts": 1, "probes": ProbeConfig(rounds=1)} if mode == "3d"
+    kw = ({"directions": 24, "offsets": 1, "angles": 1, "attempts": 1,
+           "probes": ProbeConfig(rounds=1, fingers=2, pokes=2)} if mode == "3d"
           else {"directions": 3})
     res = api_run(load_object("l_block"), str(small_arm), ExploreConfig(mode=mode, **kw), a=0.1, seed=3)
     assert (report["n_points"], report["n_points_used"]) == (len(res.exploration.points), res.n_points_used)
@@ -636,7 +638,7 @@ def test_reconstruct_builds_the_hull_input_as_run_does(tmp_path, capsys, small_a
     out = tmp_path / "o"
     # without probes: their wraps leave the link points no outlier to drop (measured), and the
     # comparison needs one
-    code, _, err = run(capsys, "run", "star_prism", "--out", str(out), "--arm", str(small_arm), *_FAST["3d"],
+    code, _, err = run(capsys, "run", "star_prism", "--out", str(out), "--arm", str(small_arm), *_SWEEPS_3D,
                        "--probes", "0", "--points", points, "--no-pictures", "-q")
     assert code == 0, err
     report = json.loads((out / "report.json").read_text())
