@@ -11,7 +11,7 @@ Per object (a built-in name, a name of the fixed non-convex set, or the groups `
 overrides a :class:`~explore3d.strategy.active.ProbeConfig` field, ``--no-probes`` turns probes
 off), then the estimate the robot would have had after the first ``k`` wraps, for every ``k`` that
 ends a round (the straight sweeps, each round of probes) and every ``--every`` wraps: the hulled
-contacts of those wraps (:func:`~explore3d.feeling.contacts.contacts_for_hull`, as the pipeline
+contacts of those wraps (:func:`~explore3d.strategy.explore.hulled_contacts`, as the pipeline
 selects them), their inverse hull carved by those wraps' swept space, scored against the truth
 (volume error %, split into the estimate's excess outside the truth and the truth it misses, both
 in % of the true volume; coverage of the true surface within 3 mm by the hulled contacts) with the wall
@@ -50,14 +50,13 @@ def prefix_score(ex, truth, centre, radius, k: int, seed: int = 0) -> dict:
     import numpy as np
 
     from explore3d.core.defaults import DEFAULT_A
-    from explore3d.feeling.contacts import contacts_for_hull
     from explore3d.geometry.metrics import shape_error
     from explore3d.reconstruction.estimators import single_centre
-    from explore3d.strategy.explore import wrap_planes
+    from explore3d.strategy.explore import hulled_contacts
     from explore3d.world.skin import surface_coverage
 
     cs = ex.contacts.select(ex.contacts.wrap < k)
-    cs = contacts_for_hull(cs, ex.config, centre, radius, plane=wrap_planes(ex.poses))
+    cs = hulled_contacts(cs, ex.config, centre, radius, ex.poses, ex.table_z)
     used = cs.select(cs.used)
     firsts = [np.asarray(p.T_world_base) for p in ex.poses[:k]]
     swept = [s for s in ex.swept if any(np.allclose(s.T_world_base, T) for T in firsts)]

@@ -157,3 +157,25 @@ def test_pokes_and_their_contours_replay_from_the_logs():
     assert np.array_equal(again.contacts.points, ex.contacts.points) and np.array_equal(again.points, ex.points)
     read = exploration_from_readings(ex.logs, spec, cfg, ex.band, c, r)
     assert [a[0].poke for a in read.attempts] == [a[0].poke for a in ex.attempts]
+
+
+def test_only_poke_contacts_facing_the_centre_are_left_out_of_the_hull():
+    """Two wraps, a straight one and a poke, each with a contact whose outward normal points away
+    from the centre and one whose normal points at it: only the poke's second is flagged."""
+    from explore3d.feeling.contacts import ContactSet
+    from explore3d.geometry.directions import WrapPose
+    from explore3d.strategy.explore import poke_facing_centre
+    from explore3d.strategy.poke import PokePose
+
+    P = np.array([[0.05, 0, 0], [0.05, 0, 0], [0, 0.05, 0], [0, 0.05, 0]], float)
+    N = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0]])
+    m = len(P)
+    cs = ContactSet(points=P, segments=np.stack([P, P], axis=1), normals=N, force_n=np.ones(m),
+                    sigma_along_m=np.zeros(m), along_interval_m=np.zeros((m, 2)), link=np.zeros(m, int),
+                    wrap=np.array([0, 0, 1, 1]), attempt=np.zeros(m, int), joint=np.zeros(m, int),
+                    kind=np.array(["inner"] * m), still=np.ones(m, bool), residual_nm=np.zeros(m),
+                    self_contact=np.zeros(m, bool), sigma_nm=np.ones(m))
+    wrap = WrapPose(np.eye(4), np.array([0, 0, 1.0]), 0.0, 0.0, "wrap")
+    poke = PokePose(np.eye(4), np.array([0, 0, 1.0]), 0.0, 0.0, "poke", q0=np.zeros(3), target=np.zeros(3))
+    assert poke_facing_centre(cs, [wrap, poke], np.zeros(3)).tolist() == [False, False, False, True]
+    assert not poke_facing_centre(cs, [wrap, wrap], np.zeros(3)).any()

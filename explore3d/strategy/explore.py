@@ -513,8 +513,7 @@ class _PersistentRunner:
 def current_estimate(spec, config, centre, radius, poses, results):
     """The estimate from the wraps run so far: the inverse hull of the hulled contacts carved by
     the swept free space (:func:`explore3d.reconstruction.carve.carve`), and the hulled contact points (m, 3)."""
-    contacts = contacts_for_hull(ContactSet.concatenate(r[3] for r in results), config, centre, radius,
-                                 plane=wrap_planes(poses))
+    contacts = hulled_contacts(ContactSet.concatenate(r[3] for r in results), config, centre, radius, poses)
     used = contacts.select(contacts.used)
     swept = [a for r in results for a in r[4]]
     return single_centre(used.points, used.wrap, centre, radius, swept, a=DEFAULT_A), used.points
@@ -753,9 +752,30 @@ def hulled_contacts(contacts: ContactSet, config: ExploreConfig, centre, radius:
     ``radius``, m, the wraps' planes from ``poses``, and on a table (``table_z``, world z, m) only
     those above its clearance (a contact located at the table is the table's)."""
     contacts = contacts_for_hull(contacts, config, centre, radius, plane=wrap_planes(poses))
+    contacts = dataclasses.replace(contacts, used=contacts.used & ~poke_facing_centre(contacts, poses, centre))
     if table_z is not None:
         contacts = dataclasses.replace(contacts, used=contacts.used & (contacts.points[:, 2] > config.floor_z(table_z)))
     return contacts
+
+
+def poke_facing_centre(contacts: ContactSet, poses, centre) -> np.ndarray:
+    """(m,) bool: the contacts of tip pokes (:class:`~explore3d.strategy.poke.PokePose` wraps of
+    ``poses``) whose surface faces the rough ``centre`` (3,), m: their located normal (outward,
+    the force on the link) points towards it, ``normal . (point - centre) <= 0``.
+
+    The inverse hull about one centre represents a surface every ray from the centre crosses once;
+    a surface facing the centre (the underside of a T prism's arm, a stair's riser behind the
+    step) is one it cannot, and a contact there pulls the estimate in along its ray, cutting off
+    what lies between.  Pokes reach such surfaces (their targets include the estimate's carved
+    faces) where the wraps seldom do: measured on the T prism (noise seed 1, 12 pokes a round), the
+    estimate's missing volume rose from 1.1 to 7.7% of the truth, the error from 9.3 to 16.6%;
+    leaving out the 6 of its 34 poke contacts that face the centre gave 10.2%.  The wraps' own
+    contacts are left as they were (4 faced the centre there; without them 9.7%)."""
+    poke = np.array([isinstance(p, PokePose) for p in poses], dtype=bool)
+    if not poke.any() or not len(contacts):
+        return np.zeros(len(contacts), dtype=bool)
+    facing = np.einsum("ij,ij->i", contacts.normals, contacts.points - np.asarray(centre, float)) <= 0.0
+    return poke[contacts.wrap] & facing
 
 
 def exploration_from_wraps(spec: ArmSpec, config: ExploreConfig, band: ContactBand, centre, radius: float, poses,
