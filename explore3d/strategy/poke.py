@@ -43,7 +43,7 @@ from scipy.spatial import cKDTree
 from explore3d.arm.kinematics import link_frames_planar, link_transforms
 from explore3d.arm.spec import ArmSpec
 from explore3d.feeling.detect import ContactBand
-from explore3d.geometry.directions import WrapPose
+from explore3d.geometry.directions import WrapPose, frame_from_normal
 from explore3d.robot.interface import Robot
 from explore3d.strategy.encircle import (
     Attempt,
@@ -213,11 +213,7 @@ def poke_poses(targets, normals, depths, estimate, centre, radius: float, spec: 
     out = []
     for ti, (p, nv, dep) in enumerate(zip(np.asarray(targets, float), np.asarray(normals, float),
                                           np.asarray(depths, float))):
-        nv = nv / np.linalg.norm(nv)
-        ref = np.array([1.0, 0.0, 0.0]) if abs(nv[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-        u = ref - nv * (ref @ nv)
-        u /= np.linalg.norm(u)
-        v = np.cross(nv, u)
+        u, v, nv = frame_from_normal(nv).T  # nv normalised; u, v span its tangent plane
         best = None
         for j in range(planes):
             a = 2 * math.pi * j / planes
