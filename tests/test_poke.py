@@ -1,5 +1,6 @@
 """Tip probing (explore3d.strategy.poke): the hook's geometry, where pokes start, a poke onto a
-known face localised on the tip, and the tip following that face."""
+known face localised on the tip, pokes into a star notch the wraps bridge, and the tip following that
+face."""
 import math
 
 import numpy as np
@@ -16,6 +17,7 @@ from explore3d.strategy.active import ProbeConfig
 from explore3d.strategy.encircle import ControlConfig
 from explore3d.strategy.poke import arm_points, hook_angles, poke_frame, poke_poses, run_poke, tip_point
 from explore3d.world.band import cached_band
+from explore3d.world import objects
 from explore3d.world.sim import ArmSimulation
 
 SPEC = load_arm("default")
@@ -101,6 +103,42 @@ def test_a_tip_poke_onto_a_flat_face_is_localised_on_the_tip_within_a_millimetre
     face = L[:3, :3] @ [SPEC.link_length, 0, 0] + L[:3, 3]  # the tip's distal face centre (the model)
     assert np.linalg.norm((cs.points[0] - face)[:2]) < SPEC.link_width / 2 + 1e-3
     assert cs.force_n[0] > 0.3
+
+
+def test_a_star_prism_notch_wider_than_the_tip_gets_contacts_inside_it():
+    """The star prism's notch (a V of 125 deg, 15 mm deep) is bridged by wraps; the estimate here is
+    the star's convex hull, as if wraps alone had made it.  One poke at each flank, a third of the
+    way out from the notch's floor, on the fixed star: each is localised on the tip within 1 mm of
+    the true flank and at least 5 mm inside the hull, where no wrap reaches."""
+    star = objects.star_prism()
+    hull = star.convex_hull
+    top = star.vertices[star.vertices[:, 2] > 0][:, :2]
+    r = np.linalg.norm(top, axis=1)
+    floor = top[np.isclose(r, 0.025)][0]  # the notch's innermost corner
+    outer = top[np.isclose(r, 0.05)]
+    tips = outer[np.argsort(np.linalg.norm(outer - floor, axis=1))[:2]]  # the notch's two points
+    targets, normals = [], []
+    for tip in tips:
+        d = (tip - floor) / np.linalg.norm(tip - floor)
+        n = np.array([d[1], -d[0]])
+        n = n if n @ (tips.mean(axis=0) - floor) > 0 else -n  # out of the star, into the notch
+        targets.append([*(floor + (tip - floor) / 3), 0.0])
+        normals.append([*n, 0.0])
+    poses = poke_poses(targets, normals, [0.01, 0.01], hull, np.zeros(3), 0.075, SPEC)
+    assert len(poses) == 2
+    band = cached_band(SPEC, ControlConfig(), SimConfig(), SensorConfig(), False)
+    with ArmSimulation(SPEC, star.vertices, star.faces, SimConfig()) as world:
+        robot = world.robot(SensorConfig())
+        attempts = []
+        for k, pose in enumerate(poses):
+            robot.reseed((0, k))
+            attempts.append(run_poke(robot, pose.T_world_base, pose.q0, pose.stop_rad, band))
+    assert all(a.contact[0] for a in attempts)
+    cs = localise_attempts(SPEC, attempts, GRAVITY, SensorConfig())
+    assert len(cs) == 2 and (cs.link == SPEC.n_links - 1).all()
+    _, off, _ = trimesh.proximity.closest_point(star, cs.points)  # evaluation: the truth
+    assert off.max() < 1e-3
+    assert trimesh.proximity.signed_distance(hull, cs.points).min() > 0.005  # > 0 inside the hull
 
 
 def test_contour_following_lays_a_line_of_contacts_on_a_flat_face():
