@@ -40,7 +40,8 @@ do):
 * ``local`` (default): one fresh process (``spawn``) per run, at most ``workers`` at once; a
   crash ends that process only;
 * ``ray``: Ray tasks on a local Ray started on demand (``ray.init(num_cpus=workers x
-  jobs_per_run)``) or an existing cluster (``address``, or the ``RAY_ADDRESS`` environment
+  jobs_per_run)``, its workers at the sweep's own priority: Ray's default runs them at nice 15,
+  and beside any other load on the cores a run then took 20x its time) or an existing cluster (``address``, or the ``RAY_ADDRESS`` environment
   variable); each mesh is shipped once (``ray.put``); every PyBullet client is created inside the
   worker by the run itself.
 
@@ -709,7 +710,7 @@ def _ray_backend(jobs, workers: int, jobs_per_run: int, address, on_start):
         if address:
             ray.init(address=address, **kw)
         else:
-            ray.init(num_cpus=workers * jobs_per_run, **kw)
+            ray.init(num_cpus=workers * jobs_per_run, _system_config={"worker_niceness": 0}, **kw)
         started = True
     try:
         remote = ray.remote(num_cpus=jobs_per_run, max_retries=0)(_ray_execute)
