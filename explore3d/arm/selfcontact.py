@@ -31,6 +31,8 @@ Lengths in metres, angles in radians.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from explore3d.arm.kinematics import link_frames_planar, link_transforms
@@ -131,6 +133,15 @@ def self_distances(spec: ArmSpec, q) -> np.ndarray:
     return out
 
 
+@functools.lru_cache(maxsize=8)
+def _non_adjacent_pairs(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(m, k=2)`` as read-only arrays, once per body count (the band's
+    calibration asks at every step)."""
+    ia, ib = np.triu_indices(m, k=2)
+    ia.flags.writeable = ib.flags.writeable = False
+    return ia, ib
+
+
 def self_contact_pairs(spec: ArmSpec, q, tolerance_m: float = SELF_CONTACT_TOLERANCE_M,
                        moving_from: int | None = None) -> list[tuple[int, int]]:
     """The pairs of non-adjacent bodies within ``tolerance_m`` metres of each other at the joint
@@ -146,7 +157,7 @@ def self_contact_pairs(spec: ArmSpec, q, tolerance_m: float = SELF_CONTACT_TOLER
     if q.shape != (spec.n_links,):
         raise ValueError(f"q must have shape ({spec.n_links},), rad; got {q.shape}")
     R = body_rectangles(spec, q)
-    ia, ib = np.triu_indices(R.shape[0], k=2)
+    ia, ib = _non_adjacent_pairs(R.shape[0])
     if moving_from is not None:
         keep = (ia - 1 < moving_from) & (moving_from <= ib - 1)
         ia, ib = ia[keep], ib[keep]

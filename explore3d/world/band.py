@@ -130,16 +130,23 @@ def calibration_block():
 
 def _link_samples(spec: ArmSpec, pitch: float) -> np.ndarray:
     """(k, 3) points on a link box's surface (corners, edges and faces on a grid of ``pitch``),
-    link frame, metres."""
+    link frame, metres (read-only; computed once per link size and pitch: the calibration asks
+    for them at every step)."""
+    return _box_surface_samples(float(spec.link_length), float(spec.link_width), float(spec.link_height), float(pitch))
+
+
+@functools.lru_cache(maxsize=16)
+def _box_surface_samples(length: float, width: float, height: float, pitch: float) -> np.ndarray:
     axes = [np.linspace(lo, hi, max(2, int(np.ceil((hi - lo) / pitch)) + 1)) for lo, hi in
-            ((0.0, spec.link_length), (-spec.link_width / 2, spec.link_width / 2),
-             (-spec.link_height / 2, spec.link_height / 2))]
+            ((0.0, length), (-width / 2, width / 2), (-height / 2, height / 2))]
     X, Y, Z = np.meshgrid(*axes, indexing="ij")
     P = np.stack([X, Y, Z], axis=-1).reshape(-1, 3)
     on_surface = np.zeros(len(P), dtype=bool)
     for i, a in enumerate(axes):
         on_surface |= np.isclose(P[:, i], a[0]) | np.isclose(P[:, i], a[-1])
-    return P[on_surface]
+    out = P[on_surface]
+    out.flags.writeable = False
+    return out
 
 
 def box_box_distance(spec: ArmSpec, T_world_link, T_world_box, extents, pitch: float = LINK_SAMPLE_PITCH_M) -> np.ndarray:
