@@ -19,11 +19,14 @@ if os.environ.get("EXPLORE3D_TEST_HIDE_OPEN3D"):
 
 # The contact bands are measured once per setting and cached on disk (explore3d.world.band.cached_band).
 # The tests measure their own in a fresh folder, so no cache from earlier code or runs leaks in
-# (worker processes and subprocesses inherit the variable).
-if not os.environ.get("EXPLORE3D_TEST_KEEP_CACHE"):
+# (worker processes and subprocesses inherit the variable).  One folder for the whole session: the
+# xdist workers inherit the controller's, so a band one worker measured (or is measuring: the
+# cache's lock) is not measured again by the other.
+if not os.environ.get("EXPLORE3D_TEST_KEEP_CACHE") and not os.environ.get("EXPLORE3D_TEST_CACHE_SET"):
     import tempfile
 
     os.environ["EXPLORE3D_CACHE_DIR"] = tempfile.mkdtemp(prefix="explore3d-test-cache-")
+    os.environ["EXPLORE3D_TEST_CACHE_SET"] = "1"
 
 
 def open3d_import_error() -> str | None:

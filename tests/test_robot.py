@@ -359,6 +359,35 @@ def test_factory_band_is_what_the_calibration_measures(monkeypatch, tmp_path):
     assert np.array_equal(shipped.swept, fresh.swept) and np.array_equal(shipped.other, fresh.other)
 
 
+def test_callers_needing_one_uncached_band_at_once_measure_it_once(monkeypatch, tmp_path):
+    """Three callers ask for the same band, not yet cached, at the same time (as a sweep's workers
+    on a new arm do): one measures it (a stand-in calibration taking 0.5 s), the others wait on its
+    lock and read what it stored; a second setting is measured on its own."""
+    import concurrent.futures
+    import time
+
+    from explore3d.feeling.detect import ContactBand
+    from explore3d.world import band as band_mod
+
+    calls = []
+
+    def slow_calibration(spec, *args, **kwargs):
+        calls.append(spec.n_links)
+        time.sleep(0.5)
+        return ContactBand(swept=np.full(spec.n_links, 0.01), other=np.full(spec.n_links, 0.02), provenance={})
+
+    monkeypatch.setenv("EXPLORE3D_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(band_mod, "calibrate_band", slow_calibration)
+    uncached = band_mod.cached_band.__wrapped__  # past the in-memory cache: each call reads the disk
+    specs = [SMALL] * 3 + [ArmSpec(name="small8", n_links=8, link_length=0.03)]
+    with concurrent.futures.ThreadPoolExecutor(4) as pool:
+        bands = list(pool.map(lambda s: uncached(s, planar=True), specs))
+    assert sorted(calls) == [8, 12]
+    sources = [b.provenance["cache"] for b in bands[:3]]
+    assert sources.count("computed") == 1 and all(s.endswith(".json") for s in sources if s != "computed")
+    assert all(np.array_equal(b.swept, bands[0].swept) for b in bands[:3]) and bands[3].provenance["cache"] == "computed"
+
+
 # --- an arm read from any URDF (issue 26) -------------------------------------------------------------
 
 def _plain_urdf(spec):

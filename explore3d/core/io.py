@@ -87,15 +87,21 @@ _PART_RE = re.compile(r"^\.([^.]+)\.(?:(\d+)\.)?[^.]+\.part(?:\.[^.]*)?$")  # at
 
 
 @contextlib.contextmanager
-def _locked(folder: Path):
-    """An exclusive ``flock`` on ``folder`` (POSIX; elsewhere no lock): two runs into one folder
-    clean and switch it one at a time."""
+def exclusive_lock(path):
+    """Hold an exclusive ``flock`` on ``path`` (a folder, or a file, created if missing) while in
+    the block; wait while another process holds it.  POSIX; elsewhere, on a file system without
+    locks, or where the file cannot be created, no lock."""
     try:
         import fcntl  # optional extra of the platform: POSIX only
     except ImportError:
         yield
         return
-    fd = os.open(folder, os.O_RDONLY)
+    path = Path(path)
+    try:
+        fd = os.open(path, os.O_RDONLY if path.is_dir() else os.O_RDONLY | os.O_CREAT, 0o644)
+    except OSError:
+        yield
+        return
     try:
         with contextlib.suppress(OSError):  # a file system without locks: unlocked, as elsewhere
             fcntl.flock(fd, fcntl.LOCK_EX)
@@ -183,7 +189,7 @@ class StagedFolder:
         try:
             with deferred_signals():
                 self.folder.mkdir(parents=True, exist_ok=True)
-                with _locked(self.folder):
+                with exclusive_lock(self.folder):  # two runs into one folder clean and switch it one at a time
                     self.cleaned = stale_leftovers(self.folder, self.owned, self.last)
                     self.path = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=self.folder))
         except BaseException:  # an interrupt deferred to the block's end, or a failure inside it
@@ -202,7 +208,8 @@ class StagedFolder:
     def commit(self) -> list[str]:
         """Switch ``folder`` to the staged files (see the class); returns their names."""
         names = self.names()
-        with deferred_signals(), _locked(self.folder):
+        # two runs into one folder clean and switch it one at a time
+        with deferred_signals(), exclusive_lock(self.folder):
             atomic_write_text(self.path / _JOURNAL, "".join(n + "\n" for n in names))
             _finish_switch(self.path, self.folder, self.owned | set(names), self.last)
             self.committed = True

@@ -41,6 +41,7 @@ measured in 1 and 2.  The result is cached once per setting, in memory and on di
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
 import functools
 import hashlib
@@ -59,7 +60,7 @@ from explore3d import __version__
 from explore3d.arm.kinematics import link_transforms
 from explore3d.arm.selfcontact import self_contact_pairs
 from explore3d.arm.spec import ArmSpec
-from explore3d.core.io import atomic_write_text
+from explore3d.core.io import atomic_write_text, exclusive_lock
 from explore3d.core.settings import SimConfig
 from explore3d.feeling.detect import ContactBand, SweepDetector
 from explore3d.geometry.directions import planar_wrap_poses, spatial_wrap_poses
@@ -373,19 +374,36 @@ def cached_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim: Si
     """:func:`calibrate_band`, computed once per setting: from memory, else from the disk cache,
     else from the factory calibration shipped with the package (the default arms' default
     settings, :func:`factory_band_path`), else measured and stored in the disk cache
-    (``provenance["cache"]`` says which)."""
+    (``provenance["cache"]`` says which).  Processes that need the same uncached band at once (a
+    sweep's workers on a new arm) measure it once: the others wait for it (a lock file beside the
+    cached band)."""
     key = band_cache_key(spec, control, sim, sensors, planar)
     path = _cache_dir() / "bands" / f"{key}.json"
-    for where in (path, factory_band_path(key)):
+    band = _stored_band(spec, (path, factory_band_path(key)))
+    if band is not None:
+        return band
+    with contextlib.suppress(OSError):  # a cache folder that cannot be written: measured unlocked, not stored
+        path.parent.mkdir(parents=True, exist_ok=True)
+    with exclusive_lock(path.with_suffix(".lock")):
+        band = _stored_band(spec, (path,))  # measured by another process while this one waited
+        if band is not None:
+            return band
+        band = calibrate_band(spec, control, sim, sensors, planar)
+        try:
+            atomic_write_text(path, json.dumps(band.to_dict(), indent=1) + "\n")
+        except OSError as exc:
+            log.info("band calibration not cached (%s)", exc)
+    return dataclasses.replace(band, provenance={**band.provenance, "cache": "computed"})
+
+
+def _stored_band(spec: ArmSpec, paths) -> ContactBand | None:
+    """The first of ``paths`` that holds a band of ``spec``'s joint count, its provenance naming
+    the file; None if none does."""
+    for where in paths:
         try:
             band = ContactBand.from_dict(json.loads(where.read_text()))
         except (OSError, ValueError, KeyError, TypeError):
             continue
         if len(band.swept) == spec.n_links:
             return dataclasses.replace(band, provenance={**band.provenance, "cache": str(where)})
-    band = calibrate_band(spec, control, sim, sensors, planar)
-    try:
-        atomic_write_text(path, json.dumps(band.to_dict(), indent=1) + "\n")
-    except OSError as exc:
-        log.info("band calibration not cached (%s)", exc)
-    return dataclasses.replace(band, provenance={**band.provenance, "cache": "computed"})
+    return None
