@@ -25,8 +25,9 @@ CASES = [
     ("cube", "planar", {"directions": 3}, 3.1, 0.031),
     # planar box (100 x 60 mm section), 3 directions: 1.58 %, +1.58 %; shifted: 5.08 %, +5.08 %
     ("box", "planar", {"directions": 3}, 3.3, 0.033),
-    # 3D cube, 24 planes x 2 angles and the default probes (one round ran: 6 more wraps), carved:
-    # 3.16 %, +2.26 %; shifted: 8.27 %, +7.85 %  (before probes and carving: 9.03 %, +5.43 %)
+    # 3D cube, 24 planes x 2 angles and the default probes (three rounds, each with 12 tip pokes:
+    # 174 wraps), carved: 3.48 %, +0.31 %; shifted: 8.17 %, +6.25 %  (one round without tip pokes:
+    # 3.16 %, +2.26 %; shifted 8.27 %, +7.85 %; before probes and carving: 9.03 %, +5.43 %)
     ("cube", "3d", {"directions": 24, "angles": 2, "jobs": 2}, 5.7, 0.05),
     # the paper's link points, planar cube, 3 directions: 10.91 %, +10.81 %; shifted: 15.55 %, +15.54 %
     ("cube", "planar", {"directions": 3, "points": "links"}, 13.2, 0.132),

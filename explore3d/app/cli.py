@@ -166,7 +166,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "surface through space the estimate leaves empty, then swept onto it (default 12; 0: none)")
     r.add_argument("--pokes", type=RUN_OPTIONS["pokes"], metavar="N",
                    help="3d: tip pokes per round of probes: the tip, the distal links bent into a hook, brought "
-                        "along the estimate's inward normal onto unsupported surface (default 0: none)")
+                        "along the estimate's inward normal onto unsupported surface (default 12; 0: none)")
     r.add_argument("--slides", type=RUN_OPTIONS["slides"], metavar="N",
                    help="3d: contour following after each poke's touch: the tip slides N steps of 3 mm each way "
                         "along the surface, a contact read at each (default 0: none; needs --pokes)")
@@ -275,7 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--fingers", type=RUN_OPTIONS["fingers"], metavar="N",
                    help="3d: finger probes per round of probes (default 12; 0: none)")
     k.add_argument("--pokes", type=RUN_OPTIONS["pokes"], metavar="N",
-                   help="3d: tip pokes per round of probes (default 0: none)")
+                   help="3d: tip pokes per round of probes (default 12; 0: none)")
     k.add_argument("--slides", type=RUN_OPTIONS["slides"], metavar="N",
                    help="3d: contour-following steps each way after each poke (default 0: none)")
     k.add_argument("--encircle", type=RUN_OPTIONS["encircle"], help="straight (default) or curl-back")
