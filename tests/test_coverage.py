@@ -35,12 +35,12 @@ def test_a_bunny_run_gets_probe_targets_and_reports_its_volume_at_stake():
     from explore3d.world.objects import load_object
 
     bunny = load_object("pybullet_data:bunny.obj", size=0.1)
-    pc = ProbeConfig(rounds=1, targets=2, orientations=1, across=False, fingers=0)
+    pc = ProbeConfig(rounds=1, targets=2, orientations=1, across=False, fingers=0, pokes=0)
     res = run(bunny, "default", ExploreConfig(directions=4, angles=2, jobs=2, probes=pc))
     (r,) = res.exploration.probe_rounds
     assert len(r["targets"]) == 2 and r["wraps"] == 2 and res.exploration.n_wraps == 10
     frac = r["stake_m3"] / r["volume_m3"]
     assert frac > 0 and np.all((r["distance_m"] > 0) & (r["distance_m"] < 2 * res.radius))
-    stop = ProbeConfig(rounds=1, targets=2, orientations=1, across=False, fingers=0, stop_stake=1.01 * frac)
+    stop = ProbeConfig(rounds=1, targets=2, orientations=1, across=False, fingers=0, pokes=0, stop_stake=1.01 * frac)
     res2 = run(bunny, "default", ExploreConfig(directions=4, angles=2, jobs=2, probes=stop))
     assert res2.exploration.probe_rounds == () and res2.exploration.n_wraps == 8

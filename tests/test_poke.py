@@ -166,7 +166,7 @@ def test_probe_config_rejects_negative_pokes_and_slides_without_pokes():
     with pytest.raises(ValueError, match="pokes"):
         ProbeConfig(pokes=-1)
     with pytest.raises(ValueError, match="slides"):
-        ProbeConfig(slides=2)
+        ProbeConfig(pokes=0, slides=2)
 
 
 def test_pokes_and_their_contours_replay_from_the_logs():
