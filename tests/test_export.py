@@ -1,4 +1,6 @@
 """Tests of explore3d.app.export: mesh formats, the estimate URDF, point PLY files."""
+import os
+
 import numpy as np
 import pytest
 import trimesh
@@ -48,22 +50,34 @@ def default_arm_estimate():
 
 
 @pytest.fixture(scope="module")
-def default_size_estimate():
+def default_size_estimate(tmp_path_factory):
     """The estimate of the README's main run's planned wraps: the 80 mm cube, the default arm, the
     default 3D exploration's 96 wraps (without its rounds of probes, which cost twice as long
     again), and its reported volume (m^3).  Its hull input holds points closer than 1 um to each
     other (checked here: 7 pairs when written), the case that made the exported meshes
-    non-manifold."""
+    non-manifold.  Run once per test session: the first xdist worker to need it stores it (exact
+    float64 arrays) in the session's shared temporary folder, under a lock the others wait on."""
     from scipy.spatial import cKDTree
 
     from explore3d import ExploreConfig, run
+    from explore3d.core.io import exclusive_lock
     from explore3d.reconstruction.hull_input import hull_input_mask
 
-    res = run(load_object("cube"), "default", ExploreConfig(jobs=2, probes=None))
-    ex = res.exploration
-    P = ex.points[hull_input_mask(ex.points, ex.point_wrap, res.centre, res.radius)]
-    assert len(cKDTree(P).query_pairs(1e-6)) > 0, "no near-coincident points: the fixture no longer tests the merge"
-    return res.estimate, res.error.estimate_size
+    shared = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        shared = shared.parent  # the session's folder, above each worker's own: one for all of them
+    stored = shared / "default_size_estimate.npz"
+    with exclusive_lock(shared / "default_size_estimate.lock"):
+        if not stored.is_file():
+            res = run(load_object("cube"), "default", ExploreConfig(jobs=2, probes=None))
+            ex = res.exploration
+            P = ex.points[hull_input_mask(ex.points, ex.point_wrap, res.centre, res.radius)]
+            assert len(cKDTree(P).query_pairs(1e-6)) > 0, "no near-coincident points: the fixture no longer tests the merge"
+            with open(stored.with_suffix(".part"), "wb") as f:
+                np.savez(f, vertices=res.estimate.vertices, faces=res.estimate.faces, volume=res.error.estimate_size)
+            stored.with_suffix(".part").replace(stored)
+        d = np.load(stored)
+    return trimesh.Trimesh(d["vertices"], d["faces"], process=False), float(d["volume"])
 
 
 def near_coincident_points(seed: int = 0) -> np.ndarray:
