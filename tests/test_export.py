@@ -72,7 +72,8 @@ def default_size_estimate(tmp_path_factory):
             res = run(load_object("cube"), "default", ExploreConfig(jobs=2, probes=None))
             ex = res.exploration
             P = ex.points[hull_input_mask(ex.points, ex.point_wrap, res.centre, res.radius)]
-            assert len(cKDTree(P).query_pairs(1e-6)) > 0, "no near-coincident points: the fixture no longer tests the merge"
+            assert len(cKDTree(P).query_pairs(1e-6)) > 0, \
+                "no near-coincident points: the fixture no longer tests the merge"
             with open(stored.with_suffix(".part"), "wb") as f:
                 np.savez(f, vertices=res.estimate.vertices, faces=res.estimate.faces, volume=res.error.estimate_size)
             stored.with_suffix(".part").replace(stored)

@@ -41,9 +41,9 @@ do):
   crash ends that process only;
 * ``ray``: Ray tasks on a local Ray started on demand (``ray.init(num_cpus=workers x
   jobs_per_run)``, its workers at the sweep's own priority: Ray's default runs them at nice 15,
-  and beside any other load on the cores a run then took 20x its time) or an existing cluster (``address``, or the ``RAY_ADDRESS`` environment
-  variable); each mesh is shipped once (``ray.put``); every PyBullet client is created inside the
-  worker by the run itself.
+  and beside any other load on the cores a run then took 20x its time) or an existing cluster
+  (``address``, or the ``RAY_ADDRESS`` environment variable); each mesh is shipped once
+  (``ray.put``); every PyBullet client is created inside the worker by the run itself.
 
 Each run gets ``jobs_per_run`` processes for its wraps (``ExploreConfig.jobs``; results do not
 depend on it).
