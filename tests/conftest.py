@@ -22,11 +22,13 @@ if os.environ.get("EXPLORE3D_TEST_HIDE_OPEN3D"):
 # (worker processes and subprocesses inherit the variable).  One folder for the whole session: the
 # xdist workers inherit the controller's, so a band one worker measured (or is measuring: the
 # cache's lock) is not measured again by the other.
-if not os.environ.get("EXPLORE3D_TEST_KEEP_CACHE") and not os.environ.get("EXPLORE3D_TEST_CACHE_SET"):
+_inherited = os.environ.get("EXPLORE3D_TEST_CACHE_SET")  # the folder this session's controller made
+if not os.environ.get("EXPLORE3D_TEST_KEEP_CACHE") and not (
+        _inherited and _inherited == os.environ.get("EXPLORE3D_CACHE_DIR") and os.path.isdir(_inherited)):
     import tempfile
 
-    os.environ["EXPLORE3D_CACHE_DIR"] = tempfile.mkdtemp(prefix="explore3d-test-cache-")
-    os.environ["EXPLORE3D_TEST_CACHE_SET"] = "1"
+    os.environ["EXPLORE3D_CACHE_DIR"] = os.environ["EXPLORE3D_TEST_CACHE_SET"] = tempfile.mkdtemp(
+        prefix="explore3d-test-cache-")
 
 
 def open3d_import_error() -> str | None:

@@ -77,8 +77,8 @@ def default_size_estimate(tmp_path_factory):
             with open(stored.with_suffix(".part"), "wb") as f:
                 np.savez(f, vertices=res.estimate.vertices, faces=res.estimate.faces, volume=res.error.estimate_size)
             stored.with_suffix(".part").replace(stored)
-        d = np.load(stored)
-    return trimesh.Trimesh(d["vertices"], d["faces"], process=False), float(d["volume"])
+        with np.load(stored) as d:
+            return trimesh.Trimesh(d["vertices"], d["faces"], process=False), float(d["volume"])
 
 
 def near_coincident_points(seed: int = 0) -> np.ndarray:

@@ -86,6 +86,10 @@ def test_explore_config_round_trips_through_json():
         assert ExploreConfig.from_dict(json.loads(json.dumps(cfg.to_dict()))) == cfg
     with pytest.raises(ValueError, match="no field"):
         ExploreConfig.from_dict({"wraps": 3})
+    # written before tip pokes existed (no "pokes" key): it ran none, though the default is now 12
+    old = ExploreConfig().to_dict()
+    del old["probes"]["pokes"], old["probes"]["slides"]
+    assert ExploreConfig.from_dict(old).probes.pokes == 0 and ExploreConfig().probes.pokes == 12
 
 
 def test_the_ros2_bag_gives_the_runs_estimate(recorded, capsys):

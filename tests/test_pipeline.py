@@ -126,7 +126,7 @@ def test_progress_with_a_phase_names_the_planned_wraps_then_each_probe_round():
     two-argument one hears only the calls after each wrap: test_run_positional_call_progress_and_result)."""
     from explore3d.strategy.explore import ProbeConfig
 
-    probes = ProbeConfig(rounds=2, targets=2, orientations=1, across=False, fingers=0, min_change=0.0)
+    probes = ProbeConfig(rounds=2, targets=2, orientations=1, across=False, fingers=0, pokes=0, min_change=0.0)
     config = ExploreConfig(directions=6, offsets=1, angles=1, attempts=1, jobs=1, probes=probes)
     calls = []
     res = run(load_object("cube"), "default", config, progress=lambda d, t, phase: calls.append((d, t, phase)))

@@ -169,7 +169,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "along the estimate's inward normal onto unsupported surface (default 12; 0: none)")
     r.add_argument("--slides", type=RUN_OPTIONS["slides"], metavar="N",
                    help="3d: contour following after each poke's touch: the tip slides N steps of 3 mm each way "
-                        "along the surface, a contact read at each (default 0: none; needs --pokes)")
+                        "along the surface, a contact read at each (default 0: none; needs pokes, on by default)")
     r.add_argument("--probe-rank", dest="probe_rank", type=RUN_OPTIONS["probe_rank"],
                    help="3d: how probe targets are chosen: stake (default: the most volume the estimate could still "
                         "have wrong, area x distance to the nearest contact) or distance (the farthest from every "

@@ -39,11 +39,12 @@ do):
 
 * ``local`` (default): one fresh process (``spawn``) per run, at most ``workers`` at once; a
   crash ends that process only;
-* ``ray``: Ray tasks on a local Ray started on demand (``ray.init(num_cpus=workers x
-  jobs_per_run)``, its workers at the sweep's own priority: Ray's default runs them at nice 15,
-  and beside any other load on the cores a run then took 20x its time) or an existing cluster
-  (``address``, or the ``RAY_ADDRESS`` environment variable); each mesh is shipped once
-  (``ray.put``); every PyBullet client is created inside the worker by the run itself.
+* ``ray``: Ray tasks on a new local Ray started on demand (``ray.init(address="local",
+  num_cpus=workers x jobs_per_run)``, its workers at normal priority, nice 0: at Ray's default
+  nice 15 a small run beside a two-worker sweep on the 2 cores took 101 s instead of 5 s) or an
+  existing cluster (``address``, or the ``RAY_ADDRESS`` environment variable); each mesh is
+  shipped once (``ray.put``); every PyBullet client is created inside the worker by the run
+  itself.
 
 Each run gets ``jobs_per_run`` processes for its wraps (``ExploreConfig.jobs``; results do not
 depend on it).
@@ -710,7 +711,7 @@ def _ray_backend(jobs, workers: int, jobs_per_run: int, address, on_start):
         if address:
             ray.init(address=address, **kw)
         else:
-            ray.init(num_cpus=workers * jobs_per_run, _system_config={"worker_niceness": 0}, **kw)
+            ray.init(address="local", num_cpus=workers * jobs_per_run, _system_config={"worker_niceness": 0}, **kw)
         started = True
     try:
         remote = ray.remote(num_cpus=jobs_per_run, max_retries=0)(_ray_execute)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import os
 import re
 import shutil
@@ -11,6 +12,8 @@ import tempfile
 from pathlib import Path
 
 from explore3d.core.interrupt import deferred_signals, pid_alive
+
+log = logging.getLogger(__name__)
 
 
 @contextlib.contextmanager
@@ -87,24 +90,35 @@ _PART_RE = re.compile(r"^\.([^.]+)\.(?:(\d+)\.)?[^.]+\.part(?:\.[^.]*)?$")  # at
 
 
 @contextlib.contextmanager
-def exclusive_lock(path):
+def exclusive_lock(path, waiting: str | None = None):
     """Hold an exclusive ``flock`` on ``path`` (a folder, or a file, created if missing) while in
-    the block; wait while another process holds it.  POSIX; elsewhere, on a file system without
-    locks, or where the file cannot be created, no lock."""
+    the block; wait while another process holds it (logging ``waiting`` at INFO first, if given).
+    POSIX; elsewhere, on a file system without locks, or where the file cannot be created, no
+    lock."""
     try:
         import fcntl  # optional extra of the platform: POSIX only
     except ImportError:
-        yield
-        return
+        fcntl = None
     path = Path(path)
-    try:
-        fd = os.open(path, os.O_RDONLY if path.is_dir() else os.O_RDONLY | os.O_CREAT, 0o644)
-    except OSError:
+    fd = None
+    if fcntl is not None:
+        try:
+            fd = os.open(path, os.O_RDONLY if path.is_dir() else os.O_RDONLY | os.O_CREAT, 0o644)
+        except OSError:  # cannot be created (a read-only folder): unlocked
+            fd = None
+    if fd is None:
         yield
         return
     try:
-        with contextlib.suppress(OSError):  # a file system without locks: unlocked, as elsewhere
-            fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            if waiting:
+                log.info(waiting)
+            with contextlib.suppress(OSError):
+                fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:  # a file system without locks: unlocked, as elsewhere
+            pass
         yield
     finally:
         os.close(fd)  # releases the lock

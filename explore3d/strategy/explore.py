@@ -213,7 +213,12 @@ class ExploreConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> "ExploreConfig":
-        """The configuration :meth:`to_dict` (or report.json's ``config.explore``) describes."""
+        """The configuration :meth:`to_dict` (or report.json's ``config.explore``) describes.  A
+        probe configuration written before tip pokes existed (no ``pokes`` key: recordings and
+        reports before session 18) ran none, whatever today's default."""
+        probes = data.get("probes") if isinstance(data, dict) else None
+        if isinstance(probes, dict) and "pokes" not in probes:
+            data = {**data, "probes": {**probes, "pokes": 0}}
         return dataclass_from_dict(cls, data)
 
     def floor_z(self, table_z: float | None) -> float | None:

@@ -384,7 +384,7 @@ def cached_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim: Si
         return band
     with contextlib.suppress(OSError):  # a cache folder that cannot be written: measured unlocked, not stored
         path.parent.mkdir(parents=True, exist_ok=True)
-    with exclusive_lock(path.with_suffix(".lock")):
+    with exclusive_lock(path.with_suffix(".lock"), waiting=f"waiting for another process's band calibration ({path})"):
         band = _stored_band(spec, (path,))  # measured by another process while this one waited
         if band is not None:
             return band
