@@ -60,7 +60,7 @@ def default_size_estimate(tmp_path_factory):
     from scipy.spatial import cKDTree
 
     from explore3d import ExploreConfig, run
-    from explore3d.core.io import exclusive_lock
+    from explore3d.core.io import atomic_path, exclusive_lock
     from explore3d.reconstruction.hull_input import hull_input_mask
 
     shared = tmp_path_factory.getbasetemp()
@@ -74,9 +74,8 @@ def default_size_estimate(tmp_path_factory):
             P = ex.points[hull_input_mask(ex.points, ex.point_wrap, res.centre, res.radius)]
             assert len(cKDTree(P).query_pairs(1e-6)) > 0, \
                 "no near-coincident points: the fixture no longer tests the merge"
-            with open(stored.with_suffix(".part"), "wb") as f:
-                np.savez(f, vertices=res.estimate.vertices, faces=res.estimate.faces, volume=res.error.estimate_size)
-            stored.with_suffix(".part").replace(stored)
+            with atomic_path(stored) as tmp:
+                np.savez(tmp, vertices=res.estimate.vertices, faces=res.estimate.faces, volume=res.error.estimate_size)
         with np.load(stored) as d:
             return trimesh.Trimesh(d["vertices"], d["faces"], process=False), float(d["volume"])
 

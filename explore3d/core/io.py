@@ -102,10 +102,8 @@ def exclusive_lock(path, waiting: str | None = None):
     path = Path(path)
     fd = None
     if fcntl is not None:
-        try:
+        with contextlib.suppress(OSError):  # cannot be created (a read-only folder): unlocked
             fd = os.open(path, os.O_RDONLY if path.is_dir() else os.O_RDONLY | os.O_CREAT, 0o644)
-        except OSError:  # cannot be created (a read-only folder): unlocked
-            fd = None
     if fd is None:
         yield
         return
