@@ -31,7 +31,7 @@ from explore3d.arm.selfcontact import SELF_CONTACT_TOLERANCE_M, self_contact_pai
 from explore3d.arm.spec import ArmSpec
 from explore3d.arm.workspace import floor_stop
 from explore3d.core.validate import check_field
-from explore3d.feeling.detect import ContactBand, SweepDetector
+from explore3d.feeling.detect import DETECTORS, ContactBand, ExternalTorque, SweepDetector
 from explore3d.feeling.localise import external_torques, localise
 from explore3d.robot.interface import JointCommand, JointReading, Robot
 
@@ -160,6 +160,13 @@ class ControlConfig:
             references and limits and report the mean of their readings (angles, velocities,
             torques) as the moment (:attr:`Moment.readings`; the torque noise of the mean falls
             as ``1 / sqrt(n)``); 0: the settle's last reading.
+        detector: ``"stall"`` (default): a contact is a position error leaving its band (the
+            paper's rule, :class:`~explore3d.feeling.detect.SweepDetector`); ``"torque"``: also
+            every joint's external torque leaving its band (the residual of the arm's model
+            against the reported motor torques, :class:`~explore3d.feeling.detect.ExternalTorque`;
+            issue 40): a touch anywhere on the chain, even beside the swept joint's axis, shows
+            on the joints proximal to it over their long levers.  Its band needs a calibration
+            with the same detector (the band's ``torque``).
     """
 
     speed: float = 3.0
@@ -186,6 +193,7 @@ class ControlConfig:
     press_force_n: float | None = None
     press_ramp_steps: int = 24
     average_steps: int = 0
+    detector: str = "stall"
 
     @classmethod
     def gentle(cls) -> "ControlConfig":
@@ -251,6 +259,8 @@ class ControlConfig:
                                  "swept joint's settle against the object): set it or drop press_force_n")
         check_field(self, "press_ramp_steps", 0, integer=True)
         check_field(self, "average_steps", 0, integer=True)
+        if self.detector not in DETECTORS:
+            raise ValueError(f"ControlConfig.detector must be one of {DETECTORS}; got {self.detector!r}")
         if self.self_contact_action not in ("retreat", "end"):
             raise ValueError(f"ControlConfig.self_contact_action must be 'retreat' or 'end'; got {self.self_contact_action!r}")
         for name in ("watch_held", "gravity_compensation", "rereference_held", "press_while_settling",
@@ -599,7 +609,9 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
     ``speed`` rad/s with motor torque limit ``torque_limit`` N m, until the detector fires
     (``band``; None: never) or the stop is reached.  ``observer(k, reading, lag, sig)`` sees every
     step's filtered signals; if it returns True or False that is the step's verdict instead of the
-    band's (the band calibration's known-object rule), None keeps the band's."""
+    band's (the band calibration's known-object rule), None keeps the band's.  With
+    ``ControlConfig.detector == "torque"`` the observer is called with a fifth argument, the
+    filtered external-torque change (n,), N m (:class:`~explore3d.feeling.detect.SweepDetector`)."""
     cfg, dt = ctl.cfg, ctl.robot.dt
     n = len(q_ref)
     at_stop = StopReason.STOP_ANGLE if is_base_stop else StopReason.LIMIT
@@ -608,7 +620,12 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
     dq_ref = np.zeros(n)
     limits = ctl.full.copy()
     limits[k] = torque_limit
-    det = SweepDetector(k, q_ref, ctl.reading.q, cfg.watch_held)
+    ext_model = ExternalTorque(ctl.spec, ctl.T, ctl.robot.gravity) if cfg.detector == "torque" else None
+    r0 = ctl.reading
+    det = SweepDetector(k, q_ref, r0.q, cfg.watch_held,
+                        ext0=None if ext_model is None else ext_model(r0.q, r0.dq, r0.tau))
+    ddq = np.zeros(n)  # the commanded acceleration of the step the reading shows (one step back)
+    w_prev = 0.0
     ctl.sweep_q.clear()
     for i in range(cfg.max_sweep_steps):
         # speed ramps up from rest and down again before the stop angle (no false alarm there)
@@ -625,9 +642,19 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
             ctl.traj_ref.append(q_ref.copy())
             ctl.traj_joint.append(k)
         lag, sig = det.update(prev, q_ref, q)
-        verdict = None if observer is None else observer(k, ctl.reading, lag, sig)
+        ext = None
+        if ext_model is not None:
+            r = ctl.reading
+            ext = det.update_torque(ext_model(r.q, r.dq, r.tau, ddq))
+            ddq[k] = (dq_ref[k] - w_prev) / dt
+            w_prev = dq_ref[k]
+        if observer is None:
+            verdict = None
+        else:
+            verdict = observer(k, ctl.reading, lag, sig) if ext is None else observer(k, ctl.reading, lag, sig, ext)
         if verdict is None:
-            verdict = band is not None and SweepDetector.exceeds(band, k, lag, sig)
+            verdict = band is not None and (SweepDetector.exceeds(band, k, lag, sig) if ext is None
+                                            else SweepDetector.exceeds(band, k, lag, sig, ext))
         if i > 0 and verdict:
             return StopReason.CONTACT
         if q_ref[k] >= stop:

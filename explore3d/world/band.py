@@ -208,12 +208,19 @@ class _Maxima:
     def __init__(self, n: int):
         self.swept = np.zeros(n)
         self.other = np.zeros(n)
+        self.torque = np.zeros(n)
         self.steps = np.zeros(n, dtype=int)
 
-    def add(self, k: int, lag: float, sig) -> None:
+    def add(self, k: int, lag: float, sig, ext=None) -> None:
         self.steps[k] += 1
         self.swept[k] = max(self.swept[k], lag)
         np.maximum(self.other, np.abs(sig), out=self.other)
+        if ext is not None:
+            np.maximum(self.torque, np.abs(ext), out=self.torque)
+
+
+def _exceeds(band: ContactBand, k: int, lag: float, sig, ext=None) -> bool:
+    return SweepDetector.exceeds(band, k, lag, sig) if ext is None else SweepDetector.exceeds(band, k, lag, sig, ext)
 
 
 def _free_motion(robot, spec: ArmSpec, control: ControlConfig, bases, self_tol: float) -> tuple[_Maxima, np.ndarray]:
@@ -223,11 +230,11 @@ def _free_motion(robot, spec: ArmSpec, control: ControlConfig, bases, self_tol: 
     upper = spec.joint_upper - control.limit_margin
     speeds, torques = sweep_speeds(spec, control), sweep_torque_limits(spec, control)
 
-    def observe(k, reading, lag, sig):
+    def observe(k, reading, lag, sig, ext=None):
         if self_contact_pairs(spec, reading.q, self_tol):
             self_steps[k] += 1
         else:
-            mx.add(k, lag, sig)
+            mx.add(k, lag, sig) if ext is None else mx.add(k, lag, sig, ext)
     for T in bases:
         for k in range(spec.n_links):
             ctl = Controller(robot, control, T, record=False)
@@ -270,9 +277,12 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
     tol = contact_tolerance_m(spec, control, sim, sensors)
     impact = _Maxima(n)
 
+    torque = control.detector == "torque"
+
     def running_band() -> ContactBand:
         return ContactBand(swept=control.band_factor * np.maximum(free.swept, impact.swept),
-                           other=control.band_factor * np.maximum(free.other, impact.other))
+                           other=control.band_factor * np.maximum(free.other, impact.other),
+                           torque=control.band_factor * np.maximum(free.torque, impact.torque) if torque else None)
 
     # Pass 1 (measure): away from the known object no step is a contact (the object says so), and
     # its signals are recorded; near it, the detector with the bands measured so far decides.
@@ -285,17 +295,17 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
             counts = {"pass": name, "object": label, "contacts": 0, "false_detections": 0, "self_contacts": 0,
                       "self_contact_steps": 0}
 
-            def observe(k, reading, lag, sig):
+            def observe(k, reading, lag, sig, ext=None):
                 touching_itself = bool(self_contact_pairs(spec, reading.q, self_tol))
                 counts["self_contact_steps"] += touching_itself
                 observe.recent.append((k, touching_itself))
                 touched_lately = any(t for j, t in observe.recent if j == k)  # this sweep's last readings
                 if touched_lately or distance(link_transforms(spec, reading.q, observe.T)[k:]).min() <= tol:
-                    return SweepDetector.exceeds(running_band() if name == "measure" else band, k, lag, sig)
+                    return _exceeds(running_band() if name == "measure" else band, k, lag, sig, ext)
                 if name == "measure":
-                    impact.add(k, lag, sig)
+                    impact.add(k, lag, sig) if ext is None else impact.add(k, lag, sig, ext)
                     return False
-                counts["false_detections"] += SweepDetector.exceeds(band, k, lag, sig)
+                counts["false_detections"] += _exceeds(band, k, lag, sig, ext)
                 return None
 
             with ArmSimulation(spec, mesh.vertices, mesh.faces, sim) as world:
@@ -312,6 +322,7 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
             passes.append(counts)
     swept = np.maximum(free.swept, impact.swept)
     other = np.maximum(free.other, impact.other)
+    torque_max = np.maximum(free.torque, impact.torque) if torque else None
     prov = {
         "protocol_version": BAND_PROTOCOL_VERSION,
         "rule": "band_factor x the largest contact-free signal (free motion of every joint in the base orientations "
@@ -327,7 +338,11 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
         "calibration_objects": [o[0] for o in objects],
         "wall_s": time.perf_counter() - t0,
     }
-    return ContactBand(swept=control.band_factor * swept, other=control.band_factor * other, provenance=prov)
+    if torque:
+        prov.update({"detector": "torque", "free_torque_max_nm": free.torque.tolist(),
+                     "impact_torque_max_nm": impact.torque.tolist()})
+    return ContactBand(swept=control.band_factor * swept, other=control.band_factor * other, provenance=prov,
+                       torque=None if torque_max is None else control.band_factor * torque_max)
 
 
 def _cache_dir() -> Path:
@@ -348,7 +363,7 @@ def band_cache_key(spec: ArmSpec, control: ControlConfig, sim: SimConfig, sensor
     ctl_d = dataclasses.asdict(control)
     if not control.rereference_distal:  # likewise
         ctl_d.pop("rereference_distal")
-    for name in ("press_force_n", "press_ramp_steps", "average_steps"):
+    for name in ("press_force_n", "press_ramp_steps", "average_steps", "detector"):
         if ctl_d[name] == ControlConfig.__dataclass_fields__[name].default:  # likewise (added after the factory bands)
             ctl_d.pop(name)
     blob = json.dumps({"protocol": BAND_PROTOCOL_VERSION, "version": __version__, "spec": dataclasses.asdict(spec),

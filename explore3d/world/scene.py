@@ -189,24 +189,34 @@ class SceneWatch:
     #: a detection is true when a link touched the object at one of the last this many steps
     TOUCH_WINDOW_STEPS = 10
 
+    #: a touch's *held* force is the largest mean of the summed normal force over this many
+    #: consecutive steps (42 ms at 240 Hz): what pushes a resting object, where the peak of a single
+    #: step is mostly the impact impulse of the first step of contact, over before any reading.
+    HELD_FORCE_STEPS = 10
+
     def __init__(self, setup: SceneSetup):
         self.setup = setup
         self.poses: list[np.ndarray] = []
         self.touch: list[np.ndarray] = []
+        self.force: list[np.ndarray] = []
         self._steps: list[bool] = []
+        self._force: list[float] = []
 
     def _observe(self, world) -> None:
-        self._steps.append(bool(world.client.getContactPoints(world.arm, world.object)))
+        cps = world.client.getContactPoints(world.arm, world.object)
+        self._steps.append(bool(cps))
+        self._force.append(float(sum(c[9] for c in cps)))
 
     def after_wrap(self, index: int, world) -> None:
         """The hook: ``index`` -1 when a world is ready (watch its steps), else after wrap
         ``index``: record its steps and the object's pose."""
         if index < 0:
             world.step_observer = self._observe
-            self._steps = []
+            self._steps, self._force = [], []
             return
         self.touch.append(np.array(self._steps, dtype=bool))
-        self._steps = []
+        self.force.append(np.array(self._force, dtype=float))
+        self._steps, self._force = [], []
         self.poses.append(object_pose(world) if world.object is not None else np.eye(4))
 
     def detections(self, exploration) -> tuple[int, int]:
@@ -224,6 +234,29 @@ class SceneWatch:
                     bad += not t[max(0, hi - self.TOUCH_WINDOW_STEPS):hi].any()
                 off += int(a.steps)
         return n, bad
+
+    def touch_forces(self, exploration) -> tuple[np.ndarray, np.ndarray]:
+        """(peak, held) normal force of every detected touch, N (evaluation only: PyBullet's
+        contact forces between the arm and the object, summed over the arm's links): over the
+        steps of the sweep that detected it and its settle, the largest single step's force and
+        the largest mean over :data:`HELD_FORCE_STEPS` consecutive steps."""
+        peak, held = [], []
+        m = self.HELD_FORCE_STEPS
+        for w, atts in enumerate(exploration.attempts):
+            if w >= len(self.force) or not len(self.force[w]):
+                continue
+            f, off = self.force[w], 0
+            for a in atts:
+                starts = np.concatenate([[0], np.asarray(a.detect_step)[:-1]])
+                for k in np.flatnonzero(np.asarray(a.contact_step) >= 0):
+                    seg = f[off + int(starts[k]):off + int(a.detect_step[k])]
+                    if not len(seg):
+                        continue
+                    peak.append(float(seg.max()))
+                    c = np.cumsum(np.concatenate([[0.0], seg]))
+                    held.append(float(((c[m:] - c[:-m]) / m).max()) if len(seg) >= m else float(seg.mean()))
+                off += int(a.steps)
+        return np.array(peak), np.array(held)
 
     def summary(self, exploration) -> dict:
         """JSON-ready: the object's drift from its settled pose after every wrap and at the end
@@ -249,4 +282,10 @@ class SceneWatch:
             out["wraps_flagged_moved"] = np.nonzero(exploration.moved)[0].tolist()
             out["wraps_redone"] = np.nonzero(exploration.redone)[0].tolist()
         out["registrations"] = [dict(r) for r in exploration.registrations]
+        peak, held = self.touch_forces(exploration)
+
+        def stats(x):
+            return {"median": float(np.median(x)), "p95": float(np.percentile(x, 95)), "max": float(x.max())} if len(x) else None
+        out["touch_force_n"] = {"touches": int(len(peak)), "peak": stats(peak), "held": stats(held),
+                                "held_steps": self.HELD_FORCE_STEPS}
         return out
