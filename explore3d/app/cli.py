@@ -178,6 +178,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="ideal (default: the object fixed, floating, frictionless, exact model, world reset per wrap) "
                         "or table (resting on a table with weight and friction 0.5, 5%% model mass error, one "
                         "persistent world, horizontal and table-clearing wraps, gentle sweeps)")
+    r.add_argument("--detector", type=RUN_OPTIONS["detector"],
+                   help="stall (the paper's rule: a joint falls behind its reference) or torque (also every joint's "
+                        "external torque, the arm's model against its motor torques: a touch anywhere shows on the "
+                        "joints before it); default: the scene's (ideal: stall; table: see docs/scene.md)")
     r.add_argument("--encircle", type=RUN_OPTIONS["encircle"],
                    help="straight (default: every joint sweeps the straight chain beyond it, the paper's method) "
                         "or curl-back (after the first contact the chain beyond a few straight links curls away "

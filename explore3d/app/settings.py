@@ -187,6 +187,9 @@ RUN_OPTIONS = {
     "encircle": _choice("encircle", ("straight", "curl-back")),
     # the world: the paper's idealised one, or the object resting on a table (explore3d.world.scene)
     "scene": _choice("scene", SCENE_NAMES),
+    # the contact detector: position errors only (stall, the paper's rule) or also every joint's external
+    # torque (torque; explore3d.feeling.detect); default: the scene's
+    "detector": _choice("detector", ("stall", "torque")),
     # evaluation after the run: this many grasps planned on each of the estimate, the truth, the estimate's
     # convex hull and an early estimate, executed on the truth (explore3d.app.grasp; 0: none)
     "grasp": _int_min("--grasp", 0),
@@ -274,7 +277,7 @@ def explore_config(opts: dict):
     from explore3d.core.settings import SimConfig  # these (numpy, the floors below) kept out of --help's start-up
     from explore3d.robot.sensing import SensorConfig
     from explore3d.strategy.active import ProbeConfig
-    from explore3d.strategy.encircle import CurlBack
+    from explore3d.strategy.encircle import ControlConfig, CurlBack
     from explore3d.strategy.explore import ExploreConfig
     from explore3d.world.scene import scene_explore_config
 
@@ -309,13 +312,16 @@ def explore_config(opts: dict):
         if opts.get("encircle") == "curl-back":
             kw["curl_back"] = CurlBack()
         if opts.get("scene", "ideal") != "ideal":
-            return scene_explore_config(opts["scene"], spec=opts.get("arm") or "default", **kw)
+            return scene_explore_config(opts["scene"], spec=opts.get("arm") or "default", detector=opts.get("detector"),
+                                        **kw)
+        if opts.get("detector") is not None:
+            kw["control"] = ControlConfig(detector=opts["detector"])
         return ExploreConfig(**kw)
     except (TypeError, ValueError) as exc:
         raise UsageError(str(exc)) from None
 
 
 #: Settings a sweep's grid may sweep (explore3d.app.sweep), each an option of ``explore3d run`` (see ``explore3d run --help``).
-SWEEP_KEYS = ("a", "angles", "arm", "attempts", "base_step", "clearance", "collision_margin", "directions",
+SWEEP_KEYS = ("a", "angles", "arm", "attempts", "base_step", "clearance", "collision_margin", "detector", "directions",
               "encircle", "face_offset", "fingers", "grasp", "method", "mirrored", "mode", "n_along", "n_height", "noise_seed", "offsets",
               "points", "pokes", "probe_rank", "probes", "scene", "seed", "sensing", "size", "slides")

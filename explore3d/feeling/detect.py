@@ -105,7 +105,11 @@ class ContactBand:
     ``other[j]`` bounds |error change| of joint j while another joint sweeps.
 
     ``torque[j]`` (N m; None: no torque channel, the stall detector) bounds |external torque
-    change| of joint j (:class:`ExternalTorque`) while any joint sweeps.
+    change| of joint j (:class:`ExternalTorque`) while any joint sweeps and no contact found
+    earlier in the attempt can load it (j beyond every joint whose sweep detected one: a contact on
+    link i loads joints 0..i only); ``torque_loaded[j]`` bounds it on the joints such a contact can
+    load (held links lying on the object: the reactions of the moving chain shift between their
+    contacts and their motors, which the model cannot tell from a new touch).
 
     ``provenance``: how the bands were derived (see :func:`explore3d.world.band.calibrate_band`), a
     JSON-ready dict recorded in report.json.
@@ -115,6 +119,7 @@ class ContactBand:
     other: np.ndarray
     provenance: dict = field(default_factory=dict, compare=False)
     torque: np.ndarray | None = None
+    torque_loaded: np.ndarray | None = None
 
     def __post_init__(self):
         s, o = np.asarray(self.swept, dtype=np.float64), np.asarray(self.other, dtype=np.float64)
@@ -129,18 +134,32 @@ class ContactBand:
             if t.shape != s.shape or not np.isfinite(t).all() or (t < 0).any():
                 raise ValueError(f"ContactBand.torque must be finite, >= 0 N m, of shape {s.shape}; got {t.shape}")
             object.__setattr__(self, "torque", t)
+            t = t if self.torque_loaded is None else np.asarray(self.torque_loaded, dtype=np.float64)
+            if t.shape != s.shape or not np.isfinite(t).all() or (t < 0).any():
+                raise ValueError(f"ContactBand.torque_loaded must be finite, >= 0 N m, of shape {s.shape}; got {t.shape}")
+            object.__setattr__(self, "torque_loaded", t)
 
     def to_dict(self) -> dict:
         d = {"swept_rad": self.swept.tolist(), "other_rad": self.other.tolist(), "provenance": self.provenance}
         if self.torque is not None:
             d["torque_nm"] = self.torque.tolist()
+            d["torque_loaded_nm"] = self.torque_loaded.tolist()
         return d
 
     @classmethod
     def from_dict(cls, d: dict) -> "ContactBand":
-        t = d.get("torque_nm")
+        t, tl = d.get("torque_nm"), d.get("torque_loaded_nm")
         return cls(swept=np.asarray(d["swept_rad"], float), other=np.asarray(d["other_rad"], float),
-                   provenance=dict(d.get("provenance", {})), torque=None if t is None else np.asarray(t, float))
+                   provenance=dict(d.get("provenance", {})), torque=None if t is None else np.asarray(t, float),
+                   torque_loaded=None if tl is None else np.asarray(tl, float))
+
+    def torque_bands(self, loaded: int) -> np.ndarray:
+        """(n,) the torque band of each joint, N m, in a sweep whose attempt detected contacts in the
+        sweeps of joints up to ``loaded`` (-1: none): ``torque_loaded`` on joints 0..loaded,
+        ``torque`` beyond."""
+        out = self.torque.copy()
+        out[: loaded + 1] = self.torque_loaded[: loaded + 1]
+        return out
 
 
 class SweepDetector:
@@ -153,9 +172,12 @@ class SweepDetector:
         watch_held: also watch the held joints (< k).
         ext0: (n,) the external torques just before the sweep, N m (:class:`ExternalTorque`;
             the torque channel's changes are judged against them); None: no torque channel.
+        loaded: the most distal joint whose sweep detected a contact earlier in the attempt (-1:
+            none): joints 0..loaded are judged against ``ContactBand.torque_loaded``.
     """
 
-    def __init__(self, k: int, q_ref0, q0, watch_held: bool = False, ext0=None):
+    def __init__(self, k: int, q_ref0, q0, watch_held: bool = False, ext0=None, loaded: int = -1):
+        self.loaded = int(loaded)
         self.k = int(k)
         self.base_err = np.asarray(q_ref0, dtype=np.float64) - np.asarray(q0, dtype=np.float64)
         self.watch_held = bool(watch_held)
@@ -189,12 +211,13 @@ class SweepDetector:
         return 0.5 * (lag + prev[0]), 0.5 * (sig + prev[1])
 
     @staticmethod
-    def exceeds(band: ContactBand, k: int, lag: float, sig, ext=None) -> bool:
+    def exceeds(band: ContactBand, k: int, lag: float, sig, ext=None, loaded: int = -1) -> bool:
         """Whether filtered signals leave ``band`` (the contact rule); ``ext`` (n,) N m, the
-        filtered external-torque change, is judged against ``band.torque`` where both exist."""
+        filtered external-torque change, is judged against ``band.torque_bands(loaded)`` where
+        both exist."""
         if lag > band.swept[k] or (np.abs(sig) > band.other).any():
             return True
-        return bool(ext is not None and band.torque is not None and (np.abs(ext) > band.torque).any())
+        return bool(ext is not None and band.torque is not None and (np.abs(ext) > band.torque_bands(loaded)).any())
 
     @staticmethod
     def ratio(band: ContactBand, k: int, lag: float, sig) -> tuple[int, float]:

@@ -604,14 +604,17 @@ def settle_touch(ctl: Controller, k: int, q_ref: np.ndarray, sweep_torque: float
 
 
 def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: ContactBand | None,
-                speed: float, torque_limit: float, is_base_stop: bool = False, observer=None) -> StopReason:
+                speed: float, torque_limit: float, is_base_stop: bool = False, observer=None,
+                loaded: int = -1) -> StopReason:
     """Sweep joint ``k``'s reference (in place in ``q_ref`` (n,), rad) towards ``stop`` rad at up to
     ``speed`` rad/s with motor torque limit ``torque_limit`` N m, until the detector fires
     (``band``; None: never) or the stop is reached.  ``observer(k, reading, lag, sig)`` sees every
     step's filtered signals; if it returns True or False that is the step's verdict instead of the
     band's (the band calibration's known-object rule), None keeps the band's.  With
     ``ControlConfig.detector == "torque"`` the observer is called with a fifth argument, the
-    filtered external-torque change (n,), N m (:class:`~explore3d.feeling.detect.SweepDetector`)."""
+    filtered external-torque change (n,), N m, and a sixth, ``loaded`` (the most distal joint whose
+    sweep detected a contact earlier in the attempt, -1: none; its torque band and those before it
+    are ``ContactBand.torque_loaded``, :class:`~explore3d.feeling.detect.SweepDetector`)."""
     cfg, dt = ctl.cfg, ctl.robot.dt
     n = len(q_ref)
     at_stop = StopReason.STOP_ANGLE if is_base_stop else StopReason.LIMIT
@@ -623,7 +626,7 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
     ext_model = ExternalTorque(ctl.spec, ctl.T, ctl.robot.gravity) if cfg.detector == "torque" else None
     r0 = ctl.reading
     det = SweepDetector(k, q_ref, r0.q, cfg.watch_held,
-                        ext0=None if ext_model is None else ext_model(r0.q, r0.dq, r0.tau))
+                        ext0=None if ext_model is None else ext_model(r0.q, r0.dq, r0.tau), loaded=loaded)
     ddq = np.zeros(n)  # the commanded acceleration of the step the reading shows (one step back)
     w_prev = 0.0
     ctl.sweep_q.clear()
@@ -651,10 +654,11 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
         if observer is None:
             verdict = None
         else:
-            verdict = observer(k, ctl.reading, lag, sig) if ext is None else observer(k, ctl.reading, lag, sig, ext)
+            verdict = (observer(k, ctl.reading, lag, sig) if ext is None
+                       else observer(k, ctl.reading, lag, sig, ext, loaded))
         if verdict is None:
             verdict = band is not None and (SweepDetector.exceeds(band, k, lag, sig) if ext is None
-                                            else SweepDetector.exceeds(band, k, lag, sig, ext))
+                                            else SweepDetector.exceeds(band, k, lag, sig, ext, loaded))
         if i > 0 and verdict:
             return StopReason.CONTACT
         if q_ref[k] >= stop:
@@ -752,7 +756,8 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
         stop = min(upper, base_stop) if base else upper
         if floor_z is not None:
             stop = floor_stop(spec, q_ref, k, ctl.T, floor_z, stop)
-        reason = sweep_joint(ctl, k, q_ref, stop, band, speeds[k], sweep_torques[k], base, observer)
+        loaded = int(np.flatnonzero(contact).max(initial=-1))
+        reason = sweep_joint(ctl, k, q_ref, stop, band, speeds[k], sweep_torques[k], base, observer, loaded)
         q = ctl.reading.q
         if reason is StopReason.CONTACT and any(self_contact_pairs(spec, qs, cfg.self_contact_tolerance, moving_from=k)
                                                 for qs in ctl.sweep_q):

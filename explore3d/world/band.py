@@ -88,7 +88,7 @@ log = logging.getLogger(__name__)
 #: are then ignored).  4: the pressing settle after each contact (explore3d.strategy.encircle).  5: the arm
 #: collides with itself; self-contacts end sweeps (StopReason.SELF) and are not contact-free steps.
 #: 6: nor is a step within SELF_CONTACT_WINDOW_STEPS readings of one; the attempt ends at a self-contact.
-BAND_PROTOCOL_VERSION = 6
+BAND_PROTOCOL_VERSION = 6  # the torque detector's bands (issue 40) came with no change to the stall bands
 
 #: Wrap poses of the impact phase: 3D, plane normals through the ball's centre (one approach each).
 IMPACT_NORMALS_3D = 6
@@ -209,18 +209,22 @@ class _Maxima:
         self.swept = np.zeros(n)
         self.other = np.zeros(n)
         self.torque = np.zeros(n)
+        self.torque_loaded = np.zeros(n)
         self.steps = np.zeros(n, dtype=int)
 
-    def add(self, k: int, lag: float, sig, ext=None) -> None:
+    def add(self, k: int, lag: float, sig, ext=None, loaded: int = -1) -> None:
         self.steps[k] += 1
         self.swept[k] = max(self.swept[k], lag)
         np.maximum(self.other, np.abs(sig), out=self.other)
         if ext is not None:
-            np.maximum(self.torque, np.abs(ext), out=self.torque)
+            a = np.abs(ext)
+            np.maximum(self.torque_loaded[: loaded + 1], a[: loaded + 1], out=self.torque_loaded[: loaded + 1])
+            np.maximum(self.torque[loaded + 1:], a[loaded + 1:], out=self.torque[loaded + 1:])
 
 
-def _exceeds(band: ContactBand, k: int, lag: float, sig, ext=None) -> bool:
-    return SweepDetector.exceeds(band, k, lag, sig) if ext is None else SweepDetector.exceeds(band, k, lag, sig, ext)
+def _exceeds(band: ContactBand, k: int, lag: float, sig, ext=None, loaded: int = -1) -> bool:
+    return (SweepDetector.exceeds(band, k, lag, sig) if ext is None
+            else SweepDetector.exceeds(band, k, lag, sig, ext, loaded))
 
 
 def _free_motion(robot, spec: ArmSpec, control: ControlConfig, bases, self_tol: float) -> tuple[_Maxima, np.ndarray]:
@@ -230,11 +234,11 @@ def _free_motion(robot, spec: ArmSpec, control: ControlConfig, bases, self_tol: 
     upper = spec.joint_upper - control.limit_margin
     speeds, torques = sweep_speeds(spec, control), sweep_torque_limits(spec, control)
 
-    def observe(k, reading, lag, sig, ext=None):
+    def observe(k, reading, lag, sig, ext=None, loaded=-1):
         if self_contact_pairs(spec, reading.q, self_tol):
             self_steps[k] += 1
         else:
-            mx.add(k, lag, sig) if ext is None else mx.add(k, lag, sig, ext)
+            mx.add(k, lag, sig) if ext is None else mx.add(k, lag, sig, ext, loaded)
     for T in bases:
         for k in range(spec.n_links):
             ctl = Controller(robot, control, T, record=False)
@@ -279,10 +283,18 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
 
     torque = control.detector == "torque"
 
+    def torque_bands():
+        """(free, loaded) torque maxima: a joint no earlier contact loads in the free motion or an
+        impact attempt bounds the free band; a loaded one, the loaded band (at least the free)."""
+        t = np.maximum(free.torque, impact.torque)
+        return t, np.maximum(t, impact.torque_loaded)
+
     def running_band() -> ContactBand:
+        t, tl = torque_bands() if torque else (None, None)
         return ContactBand(swept=control.band_factor * np.maximum(free.swept, impact.swept),
                            other=control.band_factor * np.maximum(free.other, impact.other),
-                           torque=control.band_factor * np.maximum(free.torque, impact.torque) if torque else None)
+                           torque=None if t is None else control.band_factor * t,
+                           torque_loaded=None if tl is None else control.band_factor * tl)
 
     # Pass 1 (measure): away from the known object no step is a contact (the object says so), and
     # its signals are recorded; near it, the detector with the bands measured so far decides.
@@ -295,17 +307,17 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
             counts = {"pass": name, "object": label, "contacts": 0, "false_detections": 0, "self_contacts": 0,
                       "self_contact_steps": 0}
 
-            def observe(k, reading, lag, sig, ext=None):
+            def observe(k, reading, lag, sig, ext=None, loaded=-1):
                 touching_itself = bool(self_contact_pairs(spec, reading.q, self_tol))
                 counts["self_contact_steps"] += touching_itself
                 observe.recent.append((k, touching_itself))
                 touched_lately = any(t for j, t in observe.recent if j == k)  # this sweep's last readings
                 if touched_lately or distance(link_transforms(spec, reading.q, observe.T)[k:]).min() <= tol:
-                    return _exceeds(running_band() if name == "measure" else band, k, lag, sig, ext)
+                    return _exceeds(running_band() if name == "measure" else band, k, lag, sig, ext, loaded)
                 if name == "measure":
-                    impact.add(k, lag, sig) if ext is None else impact.add(k, lag, sig, ext)
+                    impact.add(k, lag, sig) if ext is None else impact.add(k, lag, sig, ext, loaded)
                     return False
-                counts["false_detections"] += _exceeds(band, k, lag, sig, ext)
+                counts["false_detections"] += _exceeds(band, k, lag, sig, ext, loaded)
                 return None
 
             with ArmSimulation(spec, mesh.vertices, mesh.faces, sim) as world:
@@ -322,7 +334,7 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
             passes.append(counts)
     swept = np.maximum(free.swept, impact.swept)
     other = np.maximum(free.other, impact.other)
-    torque_max = np.maximum(free.torque, impact.torque) if torque else None
+    torque_max, loaded_max = torque_bands() if torque else (None, None)
     prov = {
         "protocol_version": BAND_PROTOCOL_VERSION,
         "rule": "band_factor x the largest contact-free signal (free motion of every joint in the base orientations "
@@ -340,9 +352,11 @@ def calibrate_band(spec: ArmSpec, control: ControlConfig = ControlConfig(), sim:
     }
     if torque:
         prov.update({"detector": "torque", "free_torque_max_nm": free.torque.tolist(),
-                     "impact_torque_max_nm": impact.torque.tolist()})
+                     "impact_torque_max_nm": impact.torque.tolist(),
+                     "impact_torque_loaded_max_nm": impact.torque_loaded.tolist()})
     return ContactBand(swept=control.band_factor * swept, other=control.band_factor * other, provenance=prov,
-                       torque=None if torque_max is None else control.band_factor * torque_max)
+                       torque=None if torque_max is None else control.band_factor * torque_max,
+                       torque_loaded=None if loaded_max is None else control.band_factor * loaded_max)
 
 
 def _cache_dir() -> Path:

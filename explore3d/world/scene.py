@@ -135,7 +135,7 @@ def object_pose(world) -> np.ndarray:
     return _pose(world.client, world.object)
 
 
-def scene_explore_config(name: str = "table", spec=None, **kw):
+def scene_explore_config(name: str = "table", spec=None, detector: str | None = None, **kw):
     """The :class:`~explore3d.strategy.explore.ExploreConfig` of a named scene (``--scene``): ``"ideal"`` is
     ExploreConfig's default; ``"table"`` adds :meth:`SceneConfig.named` ("table"), the gentle
     sweeps of :meth:`~explore3d.strategy.encircle.ControlConfig.gentle` with their ramp lengthened to
@@ -145,8 +145,10 @@ def scene_explore_config(name: str = "table", spec=None, **kw):
     a 5% model mass error (:attr:`~explore3d.core.settings.SimConfig.mass_error`, seed 0) and PyBullet's
     Dantzig solver with a global constraint-force mixing of 1e-6
     (:attr:`~explore3d.core.settings.SimConfig.global_cfm`; on ``kw``'s ``sim`` if given), the paper's link points as the hull's
-    input and no probes (unless ``kw`` says otherwise).  Other keyword arguments are
-    ExploreConfig's.
+    input and no probes (unless ``kw`` says otherwise).  ``detector`` (``"stall"`` or
+    ``"torque"``, :attr:`~explore3d.strategy.encircle.ControlConfig.detector`; None: the scene's
+    default) sets the contact detector of the scene's controller (not of a ``control`` in ``kw``).
+    Other keyword arguments are ExploreConfig's.
 
     Why link points: the gentle sweeps press with a few tens of mN, and the localisation's
     precision is the torque noise over the force (the profile width about 3 mm at 0.25 N even
@@ -169,9 +171,13 @@ def scene_explore_config(name: str = "table", spec=None, **kw):
         if "control" not in kw:
             budget = force_budget_n(scene.least_mass_kg, scene.table_friction)
             kw["control"] = ControlConfig.within_budget(load_arm("default" if spec is None else spec), budget)
+            if detector is not None:
+                kw["control"] = dataclasses.replace(kw["control"], detector=detector)
         kw.setdefault("points", "links")
         kw.setdefault("probes", None)
         kw["sim"] = dataclasses.replace(kw.get("sim", SimConfig()), mass_error=0.05, solver="dantzig", global_cfm=1e-6)
+    elif detector is not None and "control" not in kw:
+        kw["control"] = ControlConfig(detector=detector)
     return ExploreConfig(scene=scene, **kw)
 
 
