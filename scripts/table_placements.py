@@ -22,14 +22,17 @@ import time
 from pathlib import Path
 
 
-def one(name: str, yaw_deg: float, detail: bool = False, register: bool = False) -> dict:
+def one(name: str, yaw_deg: float, detail: bool = False, register: bool = False, detector: str | None = None,
+        settle: str | None = None) -> dict:
     import trimesh
 
     from explore3d.app.pipeline import NoContactError, ReconstructionError, run
     from explore3d.world.objects import load_object
     from explore3d.world.scene import SceneWatch, scene_explore_config, settle_scene
 
-    cfg = scene_explore_config("table")
+    cfg = scene_explore_config("table", detector=detector)
+    if settle is not None:
+        cfg = dataclasses.replace(cfg, control=dataclasses.replace(cfg.control, press_while_settling=settle == "press"))
     if register:
         cfg = dataclasses.replace(cfg, scene=dataclasses.replace(cfg.scene, register_moved=True))
     mesh = load_object(name).copy()
@@ -46,11 +49,17 @@ def one(name: str, yaw_deg: float, detail: bool = False, register: bool = False)
                 "max_drift_mm": round(1e3 * s.get("max_drift_m", float("nan")), 2)}
     wall = time.perf_counter() - t0
     s = watch.summary(res.exploration)
-    return {"object": name, "yaw_deg": yaw_deg, "register_moved": register, "percent_error": round(res.error.percent, 2),
+    force = s["touch_force_n"]
+    return {"object": name, "yaw_deg": yaw_deg, "detector": cfg.control.detector,
+            "settle": "press" if cfg.control.press_while_settling else "hold",
+            "register_moved": register, "percent_error": round(res.error.percent, 2),
             "iou": round(res.error.iou, 3), "wraps": res.exploration.n_wraps, "wall_s": round(wall, 1),
+            "band_s": round(res.exploration.band_s, 1),
             "drift_mm": round(1e3 * s["drift_m"], 2), "drift_deg": round(s["drift_deg"], 2),
             "max_drift_mm": round(1e3 * s["max_drift_m"], 2), "false_detections": s["false_detections"],
-            "detections": s["detections_watched"], "flagged": len(s.get("wraps_flagged_moved", []))} | (
+            "detections": s["detections_watched"], "flagged": len(s.get("wraps_flagged_moved", [])),
+            "touches": force["touches"], "peak_force_n": {k: round(v, 3) for k, v in (force["peak"] or {}).items()},
+            "held_force_n": {k: round(v, 3) for k, v in (force["held"] or {}).items()}} | (
         {"wraps_flagged_moved": s.get("wraps_flagged_moved", []), "registrations": s["registrations"],
          "drift_after_wrap_mm": [round(1e3 * d, 2) for d in s["drift_after_wrap_m"]],
          "drift_after_wrap_deg": [round(d, 2) for d in s["drift_after_wrap_deg"]]} if detail else {})
@@ -65,10 +74,15 @@ def main(argv=None) -> int:
                     help="also the flagged wraps, the robot's registrations (carry_back) and the true drift after each wrap")
     ap.add_argument("--register", action="store_true",
                     help="SceneConfig.register_moved=True: carry the points after a flagged wrap back (off by default)")
+    ap.add_argument("--detector", choices=["stall", "torque"], default=None,
+                    help="the contact detector (ControlConfig.detector; default: the table scene's)")
+    ap.add_argument("--settle", choices=["press", "hold"], default=None,
+                    help="after a detection, settle pressing on at the budget or holding the stopped pose "
+                         "(ControlConfig.press_while_settling; default: the table scene's)")
     args = ap.parse_args(argv)
     for name in args.objects:
         for yaw in args.yaws:
-            row = one(name, yaw, args.detail, args.register)
+            row = one(name, yaw, args.detail, args.register, args.detector, args.settle)
             with Path(args.out).open("a") as fh:
                 fh.write(json.dumps(row) + "\n")
             print(json.dumps(row), flush=True)

@@ -297,6 +297,7 @@ ORACLE_FREE_TABLE = textwrap.dedent("""
     res = run(m, arm, cfg, setup=setup)
     ex = res.exploration
     assert ex.config.scene.resting and ex.config.scene.persistent and ex.table_z == setup.table_z
+    assert ex.config.control.detector == "torque"  # the table's default: every joint's external torque watched
     assert ex.n_contacts > 0 and len(ex.moved) == ex.n_wraps
     assert abs(res.estimate.bounds[0, 2] - setup.table_z) < 1e-9  # the estimate stands on the table
     assert any(p.label.startswith("top search") for p in ex.poses)  # the search for the top ran too
@@ -306,7 +307,8 @@ ORACLE_FREE_TABLE = textwrap.dedent("""
 
 def test_table_scene_exploration_runs_with_every_world_query_removed_from_pybullet(tmp_path):
     """The table scene: the object is settled first (the evaluation's setup reads its pose), then the
-    world queries are deleted from pybullet and the persistent world's exploration, the motion
+    world queries are deleted from pybullet and the persistent world's exploration with the
+    external-torque detector (the arm's model against its motor torques), the motion
     flags and the estimate on the table run without them (the world's own physics, which applies
     the support's rolling friction to the object, bound its queries when imported)."""
     out = subprocess.run([sys.executable, "-c", ORACLE_FREE_TABLE.format(names=WORLD_QUERIES)], capture_output=True,

@@ -135,6 +135,12 @@ def object_pose(world) -> np.ndarray:
     return _pose(world.client, world.object)
 
 
+#: the table scene's contact detector (:attr:`~explore3d.strategy.encircle.ControlConfig.detector`), chosen by
+#: measurement (BENCHMARKS.md, "Touch without pushing"): on the resting cube, box and L-block it gave lower volume
+#: errors and less drift than the stall detector
+TABLE_DETECTOR = "torque"
+
+
 def scene_explore_config(name: str = "table", spec=None, detector: str | None = None, **kw):
     """The :class:`~explore3d.strategy.explore.ExploreConfig` of a named scene (``--scene``): ``"ideal"`` is
     ExploreConfig's default; ``"table"`` adds :meth:`SceneConfig.named` ("table"), the gentle
@@ -147,7 +153,10 @@ def scene_explore_config(name: str = "table", spec=None, detector: str | None = 
     (:attr:`~explore3d.core.settings.SimConfig.global_cfm`; on ``kw``'s ``sim`` if given), the paper's link points as the hull's
     input and no probes (unless ``kw`` says otherwise).  ``detector`` (``"stall"`` or
     ``"torque"``, :attr:`~explore3d.strategy.encircle.ControlConfig.detector`; None: the scene's
-    default) sets the contact detector of the scene's controller (not of a ``control`` in ``kw``).
+    default, :data:`TABLE_DETECTOR` on the table, ``"stall"`` in the ideal scene) sets the contact
+    detector of the scene's controller (not of a ``control`` in ``kw``); on the table the torque
+    detector's sweeps hold where they stopped after a detection
+    (``press_while_settling=False``), the stall detector's press on at the budget as before.
     Other keyword arguments are ExploreConfig's.
 
     Why link points: the gentle sweeps press with a few tens of mN, and the localisation's
@@ -170,9 +179,11 @@ def scene_explore_config(name: str = "table", spec=None, detector: str | None = 
     if name == "table":
         if "control" not in kw:
             budget = force_budget_n(scene.least_mass_kg, scene.table_friction)
-            kw["control"] = ControlConfig.within_budget(load_arm("default" if spec is None else spec), budget)
-            if detector is not None:
-                kw["control"] = dataclasses.replace(kw["control"], detector=detector)
+            control = ControlConfig.within_budget(load_arm("default" if spec is None else spec), budget)
+            detector = TABLE_DETECTOR if detector is None else detector
+            # the torque detector stops a sweep at the first touch on any joint; holding the stopped pose then
+            # (rather than pressing on at the sweep's limit) keeps the object where it is (docs/scene.md)
+            kw["control"] = dataclasses.replace(control, detector=detector, press_while_settling=detector == "stall")
         kw.setdefault("points", "links")
         kw.setdefault("probes", None)
         kw["sim"] = dataclasses.replace(kw.get("sim", SimConfig()), mass_error=0.05, solver="dantzig", global_cfm=1e-6)
