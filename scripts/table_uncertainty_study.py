@@ -4,6 +4,7 @@ limits on their stated uncertainty, and from the paper's link points, each score
 resting object (BENCHMARKS.md, "Table scene: the hull's input").
 
     python scripts/table_uncertainty_study.py --object cube --limits 0.5 1 2 3 5 --out /tmp/unc.jsonl
+    python scripts/table_uncertainty_study.py --object cube --detector stall --out /tmp/unc.jsonl  # the baseline
 
 The exploration is ``scene_explore_config("table", points="contacts")`` (the table scene's
 solver, controller and force budget); only the hull's input changes between rows, so the rows
@@ -33,6 +34,11 @@ def main(argv=None) -> int:
     ap.add_argument("--dump", help="npz of the contacts (optional)")
     ap.add_argument("--cache", help="pickle of the exploration: read if it exists, else written (rescoring "
                                     "the same exploration without running it again)")
+    ap.add_argument("--detector", choices=["stall", "torque"], default=None,
+                    help="the contact detector (ControlConfig.detector; default: the table scene's)")
+    ap.add_argument("--settle", choices=["press", "hold"], default=None,
+                    help="after a detection, settle pressing on at the budget or holding the stopped pose "
+                         "(default: the table scene's for the detector)")
     args = ap.parse_args(argv)
 
     from explore3d.app.pipeline import reconstruct_exploration
@@ -46,7 +52,10 @@ def main(argv=None) -> int:
     from explore3d.world.objects import load_object
     from explore3d.world.scene import SceneWatch, scene_explore_config, settle_scene
 
-    cfg = scene_explore_config("table", points="contacts")
+    cfg = scene_explore_config("table", points="contacts", detector=args.detector)
+    if args.settle is not None:
+        cfg = dataclasses.replace(cfg, control=dataclasses.replace(cfg.control,
+                                                                   press_while_settling=args.settle == "press"))
     mesh = load_object(args.object)
     setup = settle_scene(mesh, cfg.scene, sim=cfg.sim)
     watch = SceneWatch(setup)
@@ -62,7 +71,8 @@ def main(argv=None) -> int:
             Path(args.cache).write_bytes(pickle.dumps((ex, summary, wall)))
     sdf = SignedDistance(setup.truth)
     floor_z = cfg.floor_z(ex.table_z)
-    rows = [dict(object=args.object, wraps=len(ex.poses), wall_s=round(wall, 1), contacts=int(len(ex.contacts.force_n)),
+    rows = [dict(object=args.object, detector=cfg.control.detector,
+                 settle="press" if cfg.control.press_while_settling else "hold", wraps=len(ex.poses), wall_s=round(wall, 1), contacts=int(len(ex.contacts.force_n)),
                  **{k: v for k, v in summary.items() if isinstance(v, (int, float, str))})]
 
     def gap_of(cs):
