@@ -23,7 +23,7 @@ from pathlib import Path
 
 
 def one(name: str, yaw_deg: float, detail: bool = False, register: bool = False, detector: str | None = None,
-        settle: str | None = None) -> dict:
+        settle: str | None = None, held_load: str | None = None) -> dict:
     import trimesh
 
     from explore3d.app.pipeline import NoContactError, ReconstructionError, run
@@ -33,6 +33,8 @@ def one(name: str, yaw_deg: float, detail: bool = False, register: bool = False,
     cfg = scene_explore_config("table", detector=detector)
     if settle is not None:
         cfg = dataclasses.replace(cfg, control=dataclasses.replace(cfg.control, press_while_settling=settle == "press"))
+    if held_load is not None:
+        cfg = dataclasses.replace(cfg, control=dataclasses.replace(cfg.control, held_load_action=held_load))
     if register:
         cfg = dataclasses.replace(cfg, scene=dataclasses.replace(cfg.scene, register_moved=True))
     mesh = load_object(name).copy()
@@ -52,7 +54,7 @@ def one(name: str, yaw_deg: float, detail: bool = False, register: bool = False,
     force = s["touch_force_n"]
     return {"object": name, "yaw_deg": yaw_deg, "detector": cfg.control.detector,
             "settle": "press" if cfg.control.press_while_settling else "hold",
-            "register_moved": register, "percent_error": round(res.error.percent, 2),
+            "held_load": cfg.control.held_load_action, "register_moved": register, "percent_error": round(res.error.percent, 2),
             "iou": round(res.error.iou, 3), "wraps": res.exploration.n_wraps, "wall_s": round(wall, 1),
             "band_s": round(res.exploration.band_s, 1),
             "drift_mm": round(1e3 * s["drift_m"], 2), "drift_deg": round(s["drift_deg"], 2),
@@ -76,13 +78,16 @@ def main(argv=None) -> int:
                     help="SceneConfig.register_moved=True: carry the points after a flagged wrap back (off by default)")
     ap.add_argument("--detector", choices=["stall", "torque"], default=None,
                     help="the contact detector (ControlConfig.detector; default: the table scene's)")
+    ap.add_argument("--held-load", choices=["stop", "contact"], default=None,
+                    help="a torque stop seen only behind held links: stop without a contact, or a contact "
+                         "(ControlConfig.held_load_action; default: the table scene's)")
     ap.add_argument("--settle", choices=["press", "hold"], default=None,
                     help="after a detection, settle pressing on at the budget or holding the stopped pose "
                          "(ControlConfig.press_while_settling; default: the table scene's)")
     args = ap.parse_args(argv)
     for name in args.objects:
         for yaw in args.yaws:
-            row = one(name, yaw, args.detail, args.register, args.detector, args.settle)
+            row = one(name, yaw, args.detail, args.register, args.detector, args.settle, args.held_load)
             with Path(args.out).open("a") as fh:
                 fh.write(json.dumps(row) + "\n")
             print(json.dumps(row), flush=True)

@@ -90,7 +90,30 @@ def test_the_torque_channel_fires_on_any_joint_and_only_with_a_torque_band():
     assert ContactBand.from_dict(stall.to_dict()).torque is None
 
 
+def test_a_push_through_a_held_link_is_told_from_a_touch_of_the_carried_links():
+    """J^T F of a 0.1 N push on held link 2 (its joints 0..2 loaded by an earlier contact) is zero
+    on joints 3..7, so it leaves only the loaded joints' bands: a push through the held chain; the
+    same push on carried link 5 while joint 4 sweeps reaches joints 3..5 too: a new touch."""
+    n = ARM.n_links
+    q = np.array([0.3, 0.4, 0.35, 0.2, 0.1, 0.3, 0.2, 0.1])
+    p_local = np.array([0.5 * ARM.link_length, ARM.link_width / 2, 0.0])
+    band = ContactBand(swept=np.full(n, 1.0), other=np.full(n, 1.0), torque=np.full(n, 1e-4),
+                       torque_loaded=np.full(n, 1e-3))
+    zero = np.zeros(n)
+    for link, held in ((2, True), (5, False)):
+        Tl = link_transforms(ARM, q)[link]
+        ext = point_jacobian(ARM, q, link, p_local).T @ (-0.1 * Tl[:3, 1])
+        assert np.abs(ext[: link + 1]).min() > 1e-3 and not ext[link + 1:].any()  # J^T F: joints 0..link only
+        assert SweepDetector.exceeds(band, 4, 0.0, zero, ext, loaded=2)
+        assert SweepDetector.only_loaded(band, 4, 0.0, zero, ext, loaded=2) is held
+        assert not SweepDetector.only_loaded(band, 4, 0.0, zero, ext, loaded=-1)  # nothing held: a touch
+        assert not SweepDetector.only_loaded(band, 4, 2.0, zero, ext, loaded=2)  # the swept joint stalls: a touch
+        assert not SweepDetector.only_loaded(band, 4, 0.0, zero, None, loaded=2)  # no torque reading
+
+
 def test_detector_settings_are_checked():
+    with pytest.raises(ValueError, match="held_load_action must be"):
+        ControlConfig(held_load_action="push")
     with pytest.raises(ValueError, match="detector must be one of"):
         ControlConfig(detector="skin")
     with pytest.raises(ValueError, match="torque must be finite"):

@@ -220,6 +220,23 @@ class SweepDetector:
         return bool(ext is not None and band.torque is not None and (np.abs(ext) > band.torque_bands(loaded)).any())
 
     @staticmethod
+    def only_loaded(band: ContactBand, k: int, lag: float, sig, ext, loaded: int) -> bool:
+        """Whether signals that leave ``band`` (:meth:`exceeds`) do so only on the torque channel of
+        joints 0..``loaded``, the joints behind a link already lying on the object, with the swept
+        joint's lag, every error change and every more distal joint's torque in band.  A held link's
+        contact loads only the joints proximal to it (``tau_ext = J^T F``), so such a change is the
+        moving chain pressing the held links harder onto the object (their contact forces shifting
+        against their motors), not a touch of the links the sweep carries: a new touch on link i >=
+        k also reaches joints ``loaded`` + 1..i.  False when there is no torque channel or nothing
+        is loaded."""
+        if ext is None or band.torque is None or loaded < 0:
+            return False
+        if lag > band.swept[k] or (np.abs(sig) > band.other).any():
+            return False
+        out = np.abs(np.asarray(ext, dtype=np.float64)) > band.torque_bands(loaded)
+        return bool(out[: loaded + 1].any() and not out[loaded + 1:].any())
+
+    @staticmethod
     def ratio(band: ContactBand, k: int, lag: float, sig) -> tuple[int, float]:
         """(joint, signal / band) of the signal nearest to or furthest past its band: the
         swept joint's lag for ``k`` itself, another joint's error change otherwise."""

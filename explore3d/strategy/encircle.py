@@ -53,6 +53,9 @@ class StopReason(enum.Enum):
     TIMEOUT = "timeout"  #: the sweep ran out of steps
     WRAPPED = "wrapped"  #: not swept: the chain before it had already curled a full turn (``max_curl``)
     ENDED = "ended"  #: not swept: the attempt ended at a self-contact (``ControlConfig.self_contact_action``)
+    #: only joints behind a link already on the object left their torque bands: the sweep was pressing the held links
+    #: harder onto the object, no new touch (``ControlConfig.held_load_action`` "stop")
+    LOADED = "loaded"
 
 
 @dataclass(frozen=True)
@@ -167,6 +170,13 @@ class ControlConfig:
             issue 40): a touch anywhere on the chain, even beside the swept joint's axis, shows
             on the joints proximal to it over their long levers.  Its band needs a calibration
             with the same detector (the band's ``torque``).
+        held_load_action: what a torque-detector stop does when only the joints behind a link
+            already lying on the object left their bands
+            (:meth:`~explore3d.feeling.detect.SweepDetector.only_loaded`: the sweep presses the
+            held links harder onto the object, the links it carries touch nothing): ``"stop"``
+            (default) ends the sweep where it stands, records no contact and goes on with the next
+            joint (:attr:`StopReason.LOADED`); ``"contact"`` records it as a contact of the swept
+            link, as every detection was before.  The stall detector has no such stops.
     """
 
     speed: float = 3.0
@@ -194,6 +204,7 @@ class ControlConfig:
     press_ramp_steps: int = 24
     average_steps: int = 0
     detector: str = "stall"
+    held_load_action: str = "stop"
 
     @classmethod
     def gentle(cls) -> "ControlConfig":
@@ -261,6 +272,8 @@ class ControlConfig:
         check_field(self, "average_steps", 0, integer=True)
         if self.detector not in DETECTORS:
             raise ValueError(f"ControlConfig.detector must be one of {DETECTORS}; got {self.detector!r}")
+        if self.held_load_action not in ("stop", "contact"):
+            raise ValueError(f"ControlConfig.held_load_action must be 'stop' or 'contact'; got {self.held_load_action!r}")
         if self.self_contact_action not in ("retreat", "end"):
             raise ValueError(f"ControlConfig.self_contact_action must be 'retreat' or 'end'; got {self.self_contact_action!r}")
         for name in ("watch_held", "gravity_compensation", "rereference_held", "press_while_settling",
@@ -660,6 +673,9 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
             verdict = band is not None and (SweepDetector.exceeds(band, k, lag, sig) if ext is None
                                             else SweepDetector.exceeds(band, k, lag, sig, ext, loaded))
         if i > 0 and verdict:
+            if (observer is None and ext is not None and ctl.cfg.held_load_action == "stop"
+                    and SweepDetector.only_loaded(band, k, lag, sig, ext, loaded)):
+                return StopReason.LOADED
             return StopReason.CONTACT
         if q_ref[k] >= stop:
             return at_stop
@@ -777,6 +793,12 @@ def run_attempt(robot: Robot, T_world_base, band: ContactBand | None, cfg: Contr
             contact_step[k] = ctl.steps
             moments.append(settle_touch(ctl, k, q_ref, sweep_torques[k], contact))
             q = ctl.reading.q
+        elif reason is StopReason.LOADED:  # stand where the sweep stopped (going on would push the object), the
+            q = ctl.reading.q                # held joints where the push left them, as after a touch
+            if cfg.rereference_held:
+                q_ref[:k] = q[:k] + cfg.hold_bias * contact[:k]
+            q_ref[k] = q[k] + cfg.hold_bias
+            q = ctl.hold(q_ref)
         else:
             q = ctl.hold(q_ref)
         reasons.append(reason)

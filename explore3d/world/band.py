@@ -377,6 +377,7 @@ def band_cache_key(spec: ArmSpec, control: ControlConfig, sim: SimConfig, sensor
     ctl_d = dataclasses.asdict(control)
     if not control.rereference_distal:  # likewise
         ctl_d.pop("rereference_distal")
+    ctl_d.pop("held_load_action")  # the calibration's passes never take it (they judge every stop themselves)
     for name in ("press_force_n", "press_ramp_steps", "average_steps", "detector"):
         if ctl_d[name] == ControlConfig.__dataclass_fields__[name].default:  # likewise (added after the factory bands)
             ctl_d.pop(name)
