@@ -211,11 +211,16 @@ class SweepDetector:
         return 0.5 * (lag + prev[0]), 0.5 * (sig + prev[1])
 
     @staticmethod
+    def _stalls(band: ContactBand, k: int, lag: float, sig) -> bool:
+        """The stall rule: the swept joint's lag or another joint's error change out of its band."""
+        return bool(lag > band.swept[k] or (np.abs(sig) > band.other).any())
+
+    @staticmethod
     def exceeds(band: ContactBand, k: int, lag: float, sig, ext=None, loaded: int = -1) -> bool:
         """Whether filtered signals leave ``band`` (the contact rule); ``ext`` (n,) N m, the
         filtered external-torque change, is judged against ``band.torque_bands(loaded)`` where
         both exist."""
-        if lag > band.swept[k] or (np.abs(sig) > band.other).any():
+        if SweepDetector._stalls(band, k, lag, sig):
             return True
         return bool(ext is not None and band.torque is not None and (np.abs(ext) > band.torque_bands(loaded)).any())
 
@@ -229,9 +234,7 @@ class SweepDetector:
         against their motors), not a touch of the links the sweep carries: a new touch on link i >=
         k also reaches joints ``loaded`` + 1..i.  False when there is no torque channel or nothing
         is loaded."""
-        if ext is None or band.torque is None or loaded < 0:
-            return False
-        if lag > band.swept[k] or (np.abs(sig) > band.other).any():
+        if ext is None or band.torque is None or loaded < 0 or SweepDetector._stalls(band, k, lag, sig):
             return False
         out = np.abs(np.asarray(ext, dtype=np.float64)) > band.torque_bands(loaded)
         return bool(out[: loaded + 1].any() and not out[loaded + 1:].any())

@@ -673,7 +673,7 @@ def sweep_joint(ctl: Controller, k: int, q_ref: np.ndarray, stop: float, band: C
             verdict = band is not None and (SweepDetector.exceeds(band, k, lag, sig) if ext is None
                                             else SweepDetector.exceeds(band, k, lag, sig, ext, loaded))
         if i > 0 and verdict:
-            if (observer is None and ext is not None and ctl.cfg.held_load_action == "stop"
+            if (observer is None and ctl.cfg.held_load_action == "stop"
                     and SweepDetector.only_loaded(band, k, lag, sig, ext, loaded)):
                 return StopReason.LOADED
             return StopReason.CONTACT
