@@ -52,6 +52,7 @@ def one(name: str, yaw_deg: float, detail: bool = False, register: bool = False,
     wall = time.perf_counter() - t0
     s = watch.summary(res.exploration)
     force = s["touch_force_n"]
+    om = res.summary().get("object_motion", {})  # the robot's own verdict on the object's motion
     return {"object": name, "yaw_deg": yaw_deg, "detector": cfg.control.detector,
             "settle": "press" if cfg.control.press_while_settling else "hold",
             "held_load": cfg.control.held_load_action, "register_moved": register, "percent_error": round(res.error.percent, 2),
@@ -60,6 +61,8 @@ def one(name: str, yaw_deg: float, detail: bool = False, register: bool = False,
             "drift_mm": round(1e3 * s["drift_m"], 2), "drift_deg": round(s["drift_deg"], 2),
             "max_drift_mm": round(1e3 * s["max_drift_m"], 2), "false_detections": s["false_detections"],
             "detections": s["detections_watched"], "flagged": len(s.get("wraps_flagged_moved", [])),
+            "wraps_moving_object": len(s["wraps_moving_object"]),  # the truth: > 1 mm or 1 deg in the wrap
+            "motion_verdict": om.get("verdict"), "consistent_fraction": round(om.get("consistent_fraction", math.nan), 3),
             "touches": force["touches"], "peak_force_n": {k: round(v, 3) for k, v in (force["peak"] or {}).items()},
             "held_force_n": {k: round(v, 3) for k, v in (force["held"] or {}).items()}} | (
         {"wraps_flagged_moved": s.get("wraps_flagged_moved", []), "registrations": s["registrations"],

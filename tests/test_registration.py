@@ -1,5 +1,6 @@
 """Planar rigid registration of a moved object's contacts (explore3d.reconstruction.registration)
 and carrying an exploration's later epochs back (explore3d.strategy.motion.carry_back)."""
+import dataclasses
 import math
 
 import numpy as np
@@ -9,7 +10,7 @@ import trimesh
 from explore3d.arm.urdf import load_arm
 from explore3d.reconstruction.registration import planar_transform, register_on_table
 from explore3d.strategy.explore import Exploration, ExploreConfig
-from explore3d.strategy.motion import carry_back, wrap_epochs
+from explore3d.strategy.motion import carry_back, motion_trust, wrap_epochs
 
 BOX = trimesh.creation.box((0.08, 0.08, 0.08))
 
@@ -126,3 +127,39 @@ def test_carry_back_keeps_an_epoch_when_there_is_no_estimate_to_register_to():
     out = carry_back(_exploration(pts, wraps, [False, True, False]), np.zeros(3), 0.075)
     assert [r["action"] for r in out.registrations] == ["kept"] and "no estimate" in out.registrations[0]["reason"]
     assert np.array_equal(out.points[out.point_wrap == 2], later)
+
+
+def test_motion_trust_says_which_points_agree():
+    """The robot's own verdict on the estimate: no flag, all points agree; a flagged wrap whose later
+    epoch was carried back, every kept point agrees; the same epoch left where it was touched, only
+    the first epoch's points do, and the flagged wrap's own points are counted in no epoch."""
+    wraps = np.r_[np.zeros(50, int), np.ones(30, int), np.full(6, 2), np.full(20, 3)]
+    none = motion_trust([False] * 4, wraps)
+    assert none["verdict"] == "no motion noticed" and none["consistent_fraction"] == 1.0
+    assert none["points_by_epoch"] == [len(wraps)]
+    mixed = motion_trust([False, False, True, False], wraps)
+    assert mixed["verdict"] == "mixed poses" and mixed["wraps_flagged"] == [2]
+    assert mixed["points_by_epoch"] == [80, 20] and mixed["points_flagged_wraps"] == 6
+    assert mixed["consistent_fraction"] == 80 / len(wraps) and "75%" in mixed["note"]
+    kept = wraps[wraps != 2]  # carry_back drops the flagged wrap's points
+    back = motion_trust([False, False, True, False], kept, [{"epoch": 1, "action": "registered"}])
+    assert back["verdict"] == "carried back" and back["consistent_fraction"] == 1.0
+    lost = motion_trust([False, False, True, False], kept, [{"epoch": 1, "action": "dropped"}])
+    assert lost["verdict"] == "mixed poses" and lost["consistent_fraction"] == 80 / 100
+
+
+def test_carried_back_exploration_reports_its_motion():
+    """exploration_summary of a persistent world's exploration carries the robot's verdict (the
+    carry_back fixture: wrap 2 flagged, wraps 3-4 registered back)."""
+    from explore3d.app.pipeline import exploration_summary
+    from explore3d.core.settings import SceneConfig
+    rng = np.random.default_rng(4)
+    first = _band_points(rng, 30, z=(-0.04, 0.04), half=0.04)
+    P = np.vstack([first, _band_points(rng)])
+    wraps = np.r_[np.zeros(len(first), int), np.full(len(P) - len(first), 2)]
+    ex = _exploration(P, wraps, [False, True, False])
+    assert "object_motion" not in exploration_summary(ex)  # the ideal scene: a world reset every wrap
+    ex = dataclasses.replace(ex, config=dataclasses.replace(ex.config, scene=SceneConfig.named("table")))
+    om = exploration_summary(ex)["object_motion"]
+    assert om["wraps_flagged"] == [1] and om["verdict"] == "mixed poses"
+    assert om["points_by_epoch"] == [len(first), len(P) - len(first)]

@@ -28,7 +28,7 @@ from explore3d.reconstruction.hull_input import (
 )
 from explore3d.reconstruction.tabletop import cut_at_table, support_points
 from explore3d.strategy.explore import Exploration, ExploreConfig, rough_bound
-from explore3d.strategy.motion import carry_back
+from explore3d.strategy.motion import carry_back, motion_trust
 from explore3d.world.explore import explore
 from explore3d.world.objects import cross_section
 from explore3d.world.scene import settle_scene
@@ -109,13 +109,17 @@ def exploration_summary(ex: Exploration) -> dict:
     """``n_wraps``, ``n_points``, ``n_contacts``, ``wall_s``, ``sim_s`` and ``steps`` of an exploration,
     and ``probe_rounds``: per round of probes its ``targets`` (how many), ``wraps`` added, the
     estimate's ``volume_m3`` and volume at stake ``stake_m3`` before it, their ratio
-    ``stake_fraction`` and ``wall_s``."""
+    ``stake_fraction`` and ``wall_s``; in a persistent world (a resting object the arm can move)
+    also ``object_motion``: whether the robot's own readings say the object moved and how far the
+    estimate's points agree (:func:`explore3d.strategy.motion.motion_trust`)."""
     rounds = [{"targets": int(len(r["targets"])), "wraps": int(r["wraps"]), "volume_m3": float(r["volume_m3"]),
                "stake_m3": float(r["stake_m3"]), "stake_fraction": float(r["stake_m3"] / r["volume_m3"]),
                "wall_s": float(r["wall_s"])} for r in ex.probe_rounds]
     return {"n_wraps": ex.n_wraps, "n_points": int(len(ex.points)), "n_contacts": ex.n_contacts,
             "wall_s": float(ex.wall_s), "sim_s": float(ex.sim_time_s), "steps": int(ex.steps),
-            "probe_rounds": rounds}
+            "probe_rounds": rounds,
+            **({"object_motion": motion_trust(ex.moved, ex.point_wrap, ex.registrations)}
+               if ex.config.scene.persistent and ex.moved is not None else {})}
 
 
 def table_contacts(ex: Exploration) -> int:

@@ -28,7 +28,7 @@ from explore3d.reconstruction.hull_input import reconstruct_points
 from explore3d.reconstruction.registration import register_on_table
 
 __all__ = ["DEFAULT_DEPTH_M", "DEFAULT_MIN_SEGMENTS", "contact_segments", "deep_free", "moved_after", "wrap_epochs",
-           "carry_back"]
+           "carry_back", "motion_trust"]
 
 #: a point counts as swept when it lies this far inside swept space in every in-plane direction, m
 #: (the links' 1 mm contact margin, the 1 mm pixels and 0.5 mm margin of the swept areas, and
@@ -185,3 +185,45 @@ def carry_back(ex, centre, radius: float, a: float | None = None):
                                point_attempt=np.asarray(ex.point_attempt)[keep_pt],
                                point_link=np.asarray(ex.point_link)[keep_pt],
                                swept=tuple(s for s, k in zip(swept, keep_sw) if k), registrations=tuple(out))
+
+
+def motion_trust(moved, point_wrap, registrations=()) -> dict:
+    """How far an estimate can be trusted against the object's own motion, by the robot's readings
+    alone: the wraps flagged in ``moved`` (n_wraps,) bool (:func:`moved_after`), the points
+    ``point_wrap`` (p,) int of each epoch (:func:`wrap_epochs`) and what :func:`carry_back` did with
+    them (``registrations``, its dicts; () when the points were not carried back).
+
+    Returns a JSON-ready dict: ``wraps_flagged`` (list of int), ``points_by_epoch`` (epoch 0 first;
+    a flagged wrap's own points are counted in no epoch: they mix two poses),
+    ``points_flagged_wraps``, ``consistent_fraction`` (the points that lie on one pose of the
+    object: epoch 0's and every registered or kept epoch's, over all points), ``resolution_m``
+    (:data:`DEFAULT_DEPTH_M`: a motion that leaves every contact segment within it of the swept
+    space's edge is not noticed) and ``verdict``: ``"no motion noticed"``, ``"carried back"`` (every
+    later epoch registered or kept) or ``"mixed poses"`` (the estimate mixes the object's poses;
+    only ``consistent_fraction`` of its points agree), with ``note``, one sentence for a user."""
+    moved = np.asarray(moved, dtype=bool)
+    pw = np.asarray(point_wrap, dtype=int)
+    epoch = wrap_epochs(moved)
+    n_epochs = int(epoch.max()) + 1 if len(epoch) else 1
+    flagged_pt = moved[pw] if len(moved) else np.zeros(len(pw), bool)
+    by_epoch = [int(((epoch[pw] == e) & ~flagged_pt).sum()) if len(moved) else int(len(pw)) for e in range(n_epochs)]
+    agreed = {0} | {int(r["epoch"]) for r in registrations if r.get("action") in ("registered", "kept")}
+    total = int(len(pw))
+    consistent = sum(n for e, n in enumerate(by_epoch) if e in agreed)
+    flagged = np.nonzero(moved)[0].tolist()
+    out = {"wraps_flagged": flagged, "points_by_epoch": by_epoch, "points_flagged_wraps": int(flagged_pt.sum()),
+           "consistent_fraction": consistent / total if total else 1.0, "resolution_m": DEFAULT_DEPTH_M}
+    if not flagged:
+        out.update(verdict="no motion noticed",
+                   note=f"the contacts and swept space agree: no motion of more than about "
+                        f"{1e3 * DEFAULT_DEPTH_M:g} mm was noticed")
+    elif registrations and all(e in agreed for e in range(1, n_epochs) if by_epoch[e]):
+        out.update(verdict="carried back",
+                   note=f"the object moved during wraps {flagged}; the points after each motion were carried back "
+                        "onto the estimate before it")
+    else:
+        out.update(verdict="mixed poses",
+                   note=f"the object moved during wraps {flagged}; the estimate mixes its poses: "
+                        f"{100 * out['consistent_fraction']:.0f}% of the points lie on its first pose "
+                        "(SceneConfig.register_moved carries the later ones back)")
+    return out
