@@ -198,8 +198,8 @@ def build_parser() -> argparse.ArgumentParser:
     t_.add_argument("--calibrate", dest="calibrate", action="store_true", default=None,
                     help="first calibrate the contact thickness on a known 60 mm ball (never the object under "
                          "test) with the same settings, then use it (about doubles the run time)")
-    r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    r.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress display and no result line")
+    r.add_argument("-v", "--verbose", action="count", default=0, help="log what runs (-vv: debug)")
     r.set_defaults(func=cmd_run)
 
     c = sub.add_parser("reconstruct", help="inverse convex hull of a point file, or a run rebuilt from its logs",
@@ -375,7 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Plan --n antipodal parallel-jaw grasps on RUN_DIR's estimate, on the true mesh, "
                                    "on the estimate's convex hull and on an early estimate (the first 8 wraps), "
                                    "execute each on the true object resting on a table in PyBullet, and add the "
-                                   "success rates (95%% Wilson intervals) to RUN_DIR/report.json; also writes "
+                                   "success rates (95% Wilson intervals) to RUN_DIR/report.json; also writes "
                                    "grasps.json and grasps.png.")
     g.add_argument("run_dir", help="a folder 'explore3d run' wrote (3D)")
     g.add_argument("--n", type=_int_min("--n"), default=20, help="grasps planned on each mesh (default 20)")
@@ -393,6 +393,12 @@ def build_parser() -> argparse.ArgumentParser:
                        description="List the built-in objects (extents in mm, volume in cm^3).")
     o.add_argument("--json", action="store_true")
     o.set_defaults(func=cmd_objects)
+    for cmd in sub.choices.values():  # every command: -q (no progress display) and -v (log, -vv: debug)
+        have = {o for a in cmd._actions for o in a.option_strings}
+        if "-q" not in have:
+            cmd.add_argument("-q", "--quiet", action="store_true", help="no progress display")
+        if "-v" not in have:
+            cmd.add_argument("-v", "--verbose", action="count", default=0, help="log what runs (-vv: debug)")
     return p
 
 
@@ -491,58 +497,48 @@ def cmd_run(args) -> int:
         log.info("object %s: extents %s m", opts["object"], np.round(mesh.extents, 4).tolist())
         check_run_inputs(mesh, spec, config, opts["a"], opts["method"], opts.get("centre"), opts.get("radius"))
 
-        bar = None
-        if not args.quiet:
-            from tqdm import tqdm  # start-up: kept out of explore3d --help's
+        from explore3d.app.progress import RUN_STEPS, Progress  # start-up: kept out of explore3d --help's
 
-            bar = tqdm(total=None, desc="wraps", unit="wrap", file=STDERR, leave=False)
-
-        def progress(done, total, phase="wraps"):
-            """The bar shows the phase running (planned wraps, top search, probe round k of at most n):
-            its total grows as the top search and the probes add wraps."""
-            if bar is not None:
-                bar.set_description(phase, refresh=False)
-                bar.total = total
-                bar.n = done
-                bar.refresh()
-            log.info("%s: %d/%d wraps done", phase, done, total)
-
-        try:
-            res, report = run_and_report(
-                mesh, opts["arm"], config, out, output=output, a=opts["a"], method=opts["method"], seed=opts["seed"],
-                centre=opts.get("centre"), radius=opts.get("radius"), calibrate=bool(opts.get("calibrate")),
-                progress=progress, object_name=opts["object"],
-                source={"scale": opts.get("scale"), "size": opts.get("size")})
-        except NoContactError:
-            raise RunError("no contacts at all: the arm never touched the object; check the object size and rough "
-                           "bound against the arm (--size, --arm, --centre, --radius) or add --directions/--attempts "
-                           f"(report written to {out / 'report.json'})") from None
-        except ReconstructionError as exc:
-            raise RunError(f"reconstruction failed: {exc} (report written to {out / 'report.json'})") from None
-        finally:
-            if bar is not None:
-                bar.close()
-        if opts.get("record"):
-            from explore3d.app.offline import recording_dict, write_recording  # start-up: kept out of --help's
-            from explore3d.app.rosbag import write_bag  # start-up: kept out of --help's
-
-            write_recording(res.exploration, opts["record"], res.centre, res.radius, opts["a"], opts["method"])
-            write_bag(recording_dict(res.exploration, res.centre, res.radius, opts["a"], opts["method"]),
-                      res.exploration.logs, Path(opts["record"]) / "bag")
-        if opts.get("grasp"):
-            from explore3d.app.grasp import GraspConfig, grasp_run  # start-up: kept out of --help's
-
-            grasp = grasp_run(out, GraspConfig(n=opts["grasp"]), pictures=not opts.get("no_pictures", False),
-                              truth=mesh)
-        if opts.get("rerun"):
-            from explore3d.app.rerun_view import write_rerun  # start-up: kept out of --help's
-
+        steps = RUN_STEPS + ("recording",) * bool(opts.get("record")) + ("grasping",) * bool(opts.get("grasp")) + (
+            "3D recording",) * bool(opts.get("rerun"))
+        with Progress(steps, enabled=not args.quiet, prog=PROG) as progress:
             try:
-                write_rerun(opts["rerun"], res, mesh if res.setup is None else res.truth, a=opts["a"],
-                            method=opts["method"])
-            except OSError as exc:
-                raise RunError(f"cannot write the rerun recording {opts['rerun']} ({exc.strerror or exc}); the run's "
-                               f"files are in {out}") from None
+                res, report = run_and_report(
+                    mesh, opts["arm"], config, out, output=output, a=opts["a"], method=opts["method"], seed=opts["seed"],
+                    centre=opts.get("centre"), radius=opts.get("radius"), calibrate=bool(opts.get("calibrate")),
+                    progress=progress, object_name=opts["object"],
+                    source={"scale": opts.get("scale"), "size": opts.get("size")})
+            except NoContactError:
+                raise RunError("no contacts at all: the arm never touched the object; check the object size and rough "
+                               "bound against the arm (--size, --arm, --centre, --radius) or add --directions/--attempts "
+                               f"(report written to {out / 'report.json'})") from None
+            except ReconstructionError as exc:
+                raise RunError(f"reconstruction failed: {exc} (report written to {out / 'report.json'})") from None
+            if opts.get("record"):
+                progress.step("recording")
+                from explore3d.app.offline import recording_dict, write_recording  # start-up: kept out of --help's
+                from explore3d.app.rosbag import write_bag  # start-up: kept out of --help's
+
+                write_recording(res.exploration, opts["record"], res.centre, res.radius, opts["a"], opts["method"])
+                write_bag(recording_dict(res.exploration, res.centre, res.radius, opts["a"], opts["method"]),
+                          res.exploration.logs, Path(opts["record"]) / "bag")
+            if opts.get("grasp"):
+                progress.step("grasping")
+                from explore3d.app.grasp import GraspConfig, grasp_run  # start-up: kept out of --help's
+
+                grasp = grasp_run(out, GraspConfig(n=opts["grasp"]), pictures=not opts.get("no_pictures", False),
+                                  truth=mesh)
+            if opts.get("rerun"):
+                progress.step("3D recording")
+                from explore3d.app.rerun_view import write_rerun  # start-up: kept out of --help's
+
+                try:
+                    write_rerun(opts["rerun"], res, mesh if res.setup is None else res.truth, a=opts["a"],
+                                method=opts["method"])
+                except OSError as exc:
+                    raise RunError(f"cannot write the rerun recording {opts['rerun']} ({exc.strerror or exc}); the run's "
+                                   f"files are in {out}") from None
+            progress.finish()
     ex, err = res.exploration, res.error
     if not args.quiet:
         print(f"{opts['object']}: {err.percent:.2f} % error, IoU {err.iou:.3f}, {ex.n_wraps} wraps, "
@@ -626,8 +622,12 @@ def _reconstruct_log(args, out: Path, suffix: str) -> int:
                 rec = read_bag(args.bag)
         except ValueError as exc:
             raise RunError(f"{flag}: {exc}") from None
+        from explore3d.app.progress import Progress  # start-up: kept out of explore3d --help's
+
         try:
-            ex, est = reconstruct_recording(rec, replay=not args.readings)
+            with Progress(enabled=not args.quiet, prog=PROG) as progress:
+                ex, est = reconstruct_recording(rec, replay=not args.readings, progress=progress)
+                progress.finish()
         except ReconstructionError as exc:
             raise RunError(f"reconstruction failed: {exc}") from None
         except LogMismatchError as exc:
@@ -817,8 +817,12 @@ def cmd_compare(args) -> int:
         except ValueError as exc:
             raise UsageError(str(exc)) from None
         mesh = load_object(args.object, size=args.size)
+        from explore3d.app.progress import Progress  # start-up: kept out of explore3d --help's
+
         try:
-            report = compare(mesh, spec, config, a=args.a)
+            with Progress(enabled=not args.quiet, prog=PROG) as progress:
+                report = compare(mesh, spec, config, a=args.a, progress=progress)
+                progress.finish()
         except (NoContactError, ReconstructionError) as exc:
             raise RunError(str(exc)) from None
     report["object"] = args.object
@@ -988,8 +992,11 @@ def grasp_config(args):
 def cmd_grasp(args) -> int:
     with quiet_c_output():  # PyBullet's banners
         from explore3d.app.grasp import SOURCES, grasp_run  # start-up: kept out of --help's
+        from explore3d.app.progress import Progress  # start-up: kept out of --help's
 
-        entry = grasp_run(args.run_dir, grasp_config(args), pictures=not args.no_pictures)
+        with Progress(("writing",), unit="grasp", enabled=not args.quiet, prog=PROG) as progress:
+            entry = grasp_run(args.run_dir, grasp_config(args), pictures=not args.no_pictures, progress=progress)
+            progress.finish()
     for name in SOURCES:
         if name in entry:
             r = entry[name]
@@ -1097,6 +1104,7 @@ def _main(argv) -> int:
     try:
         try:
             args = parser.parse_args(argv)
+            _setup_logging(args.verbose)
             return int(args.func(args) or 0)
         except (KeyboardInterrupt, SystemExit):
             raise

@@ -119,19 +119,26 @@ def early_estimate(run_dir: Path, report: dict, wraps: int) -> trimesh.Trimesh:
     return hull.shape()
 
 
-def plan_and_execute(truth, sources: dict, table_z: float, config: GraspConfig = GraspConfig()) -> dict:
+def plan_and_execute(truth, sources: dict, table_z: float, config: GraspConfig = GraspConfig(), progress=None) -> dict:
     """For each named mesh of ``sources`` (world frame), ``config.n`` grasps planned on it and
     executed on ``truth``: per source ``planned``, ``held``, ``rate`` (held over planned; None
     when none was planned), ``wilson_95`` (lo, hi), ``outcomes`` (each grasp's),
     ``push_median_m`` and ``push_max_m`` (how far closing moved the object,
     :attr:`~explore3d.world.grasping.GraspExecution.push_m`; None when none was planned), ``grasps``
-    (:meth:`GraspSet.to_dicts`) and ``timings`` (wall-clock ``plan_s``, ``execute_s``)."""
+    (:meth:`GraspSet.to_dicts`) and ``timings`` (wall-clock ``plan_s``, ``execute_s``).
+    ``progress``: None, or ``progress(done, total, phase)`` as each source's planning and execution
+    starts (grasps done of at most ``config.n`` per source)."""
     out = {}
+    total, done = config.n * len(sources), 0
     for name, mesh in sources.items():
+        if progress is not None:
+            progress(done, total, f"planning on the {name.replace('_', ' ')}")
         t0 = time.perf_counter()
         grasps = sample_grasps(mesh, config.n, config.gripper, seed=config.seed, table_z=table_z,
                                config=config.sampler)
         t1 = time.perf_counter()
+        if progress is not None:
+            progress(done, total, f"executing the {name.replace('_', ' ')}'s grasps")
         runs = execute_grasps(truth, grasps, config.gripper, table_z, config.execution)
         t2 = time.perf_counter()
         held = sum(r.outcome is Outcome.HELD for r in runs)
@@ -144,16 +151,18 @@ def plan_and_execute(truth, sources: dict, table_z: float, config: GraspConfig =
                      "timings": {"plan_s": t1 - t0, "execute_s": t2 - t1},
                      "grasps": [{**g, "outcome": r.outcome.value, "rise_m": r.rise_m, "push_m": r.push_m}
                                 for g, r in zip(grasps.to_dicts(), runs)]}
+        done += config.n
     return out
 
 
-def grasp_run(run_dir, config: GraspConfig = GraspConfig(), pictures: bool = True, truth=None) -> dict:
+def grasp_run(run_dir, config: GraspConfig = GraspConfig(), pictures: bool = True, truth=None, progress=None) -> dict:
     """Plan and execute grasps for the run in ``run_dir`` (module docstring); adds a ``grasp``
     entry to its report.json (rates, intervals, the configuration) and its wall-clock times to
     the report's ``timings`` (``grasp_s``, and ``grasp`` per source: ``plan_s``, ``execute_s``),
     and writes ``grasps.json`` (every grasp with its pose and outcome) and, with ``pictures``,
     ``grasps.png``.  ``truth``: the object mesh the run was given (None: loaded again, see
-    :func:`run_truth`).  Returns the ``grasp`` entry."""
+    :func:`run_truth`).  ``progress``: as :func:`plan_and_execute`'s, and called with the phase
+    ``"writing"`` as the files are written.  Returns the ``grasp`` entry."""
     run_dir = Path(run_dir)
     path = run_dir / "report.json"
     if not path.is_file():
@@ -172,7 +181,9 @@ def grasp_run(run_dir, config: GraspConfig = GraspConfig(), pictures: bool = Tru
     except (ValueError, FileNotFoundError) as exc:
         skipped["early"] = str(exc).split("; ")[0]
     t0 = time.perf_counter()
-    results = plan_and_execute(truth, sources, table_z, config)
+    results = plan_and_execute(truth, sources, table_z, config, progress)
+    if progress is not None:
+        progress(config.n * len(sources), None, "writing")
     entry = {"config": asdict(config), "table_z_m": table_z, "skipped": skipped,
              **{name: {k: v for k, v in r.items() if k not in ("grasps", "timings")} for name, r in results.items()}}
     timings = report.setdefault("timings", {})

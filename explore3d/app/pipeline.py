@@ -27,7 +27,7 @@ from explore3d.reconstruction.hull_input import (
     reconstruct_points,
 )
 from explore3d.reconstruction.tabletop import cut_at_table, support_points
-from explore3d.strategy.explore import Exploration, ExploreConfig, rough_bound
+from explore3d.strategy.explore import Exploration, ExploreConfig, rough_bound, takes_phase
 from explore3d.strategy.motion import carry_back, motion_trust
 from explore3d.world.explore import explore
 from explore3d.world.objects import cross_section
@@ -335,7 +335,10 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
         arm: built-in arm name, URDF path or :class:`~explore3d.arm.spec.ArmSpec`.
         config: how to explore.
         a: inverse-hull coarseness > 0; method: "exponential" or "spherical".
-        progress: None, or ``progress(done, total)`` called after each wrap.
+        progress: None, or ``progress(done, total)`` called after each wrap
+            (:func:`~explore3d.strategy.explore.explore_robots`); one that takes a phase
+            (``progress(done, total, phase)``) is also called with ``total`` None and the phase
+            ``"reconstructing"`` and then ``"scoring"`` as those start.
         centre, radius: the rough location (3,), world frame, metres, and bounding radius (m) the
             robot is told (the user's rough bound of where the object is).  Default: the
             bounding-box centre of ``mesh`` and 1.05 times its largest vertex distance from it
@@ -365,8 +368,13 @@ def run(mesh, arm="default", config: ExploreConfig = ExploreConfig(), a: float =
             "or a correct rough bound (centre=/radius=, --centre/--radius)",
             exploration=ex,
         )
+    phased = progress is not None and takes_phase(progress)
+    if phased:
+        progress(ex.n_wraps, None, "reconstructing")
     ex, hull, carved, cut, est = estimate_exploration(ex, centre, radius, a, method)
     truth = planar_truth(mesh, float(centre[2])) if config.mode == "planar" else truth
+    if phased:
+        progress(ex.n_wraps, None, "scoring")
     return Result(exploration=ex, hull=hull, truth=truth, error=shape_error(est, truth, seed=seed),
                   centre=centre, radius=radius, n_points_used=len(hull.points), carved=carved, cut=cut,
                   setup=setup)  # the hull's input

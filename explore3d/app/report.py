@@ -30,7 +30,7 @@ from explore3d.core.defaults import DEFAULT_A
 from explore3d.core.interrupt import check_interrupt
 from explore3d.core.io import StagedFolder, atomic_write_text, json_text
 from explore3d.reconstruction.freespace import save_swept
-from explore3d.strategy.explore import Exploration, ExploreConfig
+from explore3d.strategy.explore import Exploration, ExploreConfig, takes_phase
 from explore3d.world.calibration import calibrate_thickness
 from explore3d.world.quality import contact_quality
 from explore3d.world.scene import SceneWatch, settle_scene
@@ -304,6 +304,8 @@ def _run_into(staged, report, timings, t_start, mesh, spec, config, output, a, m
         report["contact_quality"] = contact_quality(res.exploration, mesh if res.setup is None else res.truth).to_dict()  # evaluation only
         timings["quality_s"] = time.perf_counter() - t0
     check_interrupt()
+    if progress is not None and takes_phase(progress):
+        progress(res.exploration.n_wraps, None, "writing")
     t0 = time.perf_counter()
     files = write_result(res, mesh if res.setup is None else res.truth, stage, output.fmt, pictures=output.pictures, density=output.density,
                          height=output.height)

@@ -645,6 +645,23 @@ def takes_phase(progress) -> bool:
     return True
 
 
+def most_wraps(config: ExploreConfig, n_planned: int, table: bool = False) -> int:
+    """The most wraps an exploration of ``n_planned`` planned wraps can run under ``config``: the
+    planned ones, a table's top search (``table_top_wraps``, when ``table`` and
+    ``table_top_tol_m`` is set, 3D) and per round of probes ``targets * (orientations + across) +
+    fingers + pokes``.  A persistent world runs each wrap after which the object moved once more
+    (``SceneConfig.redo_moved``): those come on top, as they happen."""
+    n = int(n_planned)
+    if config.mode != "3d":
+        return n
+    if table and config.table_top_tol_m is not None:
+        n += config.table_top_wraps
+    pc = config.probes
+    if pc is not None and pc.rounds > 0:
+        n += pc.rounds * (pc.targets * (pc.orientations + int(pc.across)) + pc.fingers + pc.pokes)
+    return n
+
+
 def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: ContactBand, centre, radius: float,
                    progress=None, *, table_z: float | None = None, persistent: bool = False, after_wrap=None,
                    band_s: float = 0.0) -> Exploration:
@@ -657,8 +674,9 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
         band: the contact detector's band of this arm and setting
             (:func:`explore3d.world.band.cached_band`, or a real arm's own calibration).
         centre, radius: the rough location (3,) and bounding radius (m) the robot is told.
-        progress: None, or a callable ``progress(done, total)`` called after each wrap (``total``
-            grows as the top search and the rounds of probes add wraps).  One that takes a third
+        progress: None, or a callable ``progress(done, total)`` called after each wrap (``total``:
+            the most wraps the exploration can run, :func:`most_wraps`, fixed from the start but
+            for the wraps a persistent world repeats; it ends at or below it).  One that takes a third
             argument (:func:`takes_phase`) is called ``progress(done, total, phase)``, also as
             each phase starts, with ``phase`` "planned wraps", "top search", "planning probe round
             k of at most n" (while its targets are chosen) or "probe round k of at most n".
@@ -686,12 +704,15 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
     runner = _PersistentRunner(workcells, after_wrap) if persistent else _WrapRunner(workcells, jobs, after_wrap)
     phased = progress is not None and takes_phase(progress)
     phase, probe_round = "planned wraps", 0
+    bound = most_wraps(config, len(poses), floor_z is not None)
+    repeats = [0]  # wraps a persistent world repeated (on top of the bound)
 
     def report():
+        total = max(bound + repeats[0], len(poses))
         if phased:
-            progress(len(results), len(poses), phase)
+            progress(len(results), total, phase)
         elif progress:
-            progress(len(results), len(poses))
+            progress(len(results), total)
 
     def task(i, p):
         return (i, p, band, config, (centre, radius), floor_z)
@@ -724,6 +745,7 @@ def explore_robots(workcells, spec: ArmSpec, config: ExploreConfig, band: Contac
                     if not moved[-1] or redo or not config.scene.redo_moved:
                         break
                     poses.insert(i + 1, p)  # the same wrap again, where the object is now
+                    repeats[0] += 1
                     redo = True
 
         def run_probes(new_poses):

@@ -13,7 +13,7 @@ import numpy as np
 
 from explore3d.arm.urdf import load_arm
 from explore3d.core.settings import SimConfig
-from explore3d.strategy.explore import Exploration, ExploreConfig, explore_robots, rough_bound
+from explore3d.strategy.explore import Exploration, ExploreConfig, explore_robots, rough_bound, takes_phase
 from explore3d.world.band import cached_band
 from explore3d.world.scene import SceneSetup, settle_scene
 from explore3d.world.sim import ArmSimulation
@@ -67,6 +67,8 @@ def explore(mesh, arm="default", config: ExploreConfig = ExploreConfig(), centre
     centre = c0 if centre is None else np.asarray(centre, float)
     radius = r0 if radius is None else float(radius)
     table_z = None if setup is None else setup.table_z
+    if progress is not None and takes_phase(progress):
+        progress(0, None, "contact band")  # measured once per arm and setting, then cached
     band = cached_band(spec, config.control, config.sim, config.sensors, config.mode == "planar")
     band_s = time.perf_counter() - t0
     persistent = setup is not None and config.scene.persistent
