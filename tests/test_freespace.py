@@ -218,3 +218,68 @@ def test_the_swept_space_of_a_real_exploration_never_holds_the_object():
     near = trimesh.sample.sample_surface(m, 4000, seed=0)[0]
     out = near + 0.002 * np.sign(near) * (np.abs(near) > 0.0399)
     assert is_free(ex.swept, out).sum() > 20  # measured 73 of 4000 (4 wraps' slabs cover ~2% of the shell)
+
+
+# --- fins the carving leaves (explore3d.reconstruction.carve.trim_fins) ------------------------------
+
+def _box_with_fin(thickness: float):
+    """A 40 mm box with a plate ``thickness`` m thick, 20 mm wide, standing 10 mm out of its +x face."""
+    box = trimesh.creation.box((0.04, 0.04, 0.04))
+    plate = trimesh.creation.box((0.012, thickness, 0.02))
+    plate.apply_translation([0.02 + 0.005, 0.0, 0.0])  # 2 mm inside the face, 10 mm out
+    return box, box.union(plate, engine="manifold")
+
+
+def test_a_thin_fin_is_trimmed_and_the_body_kept():
+    """A 1 mm plate 10 mm out of a box: trimmed to within a voxel of the face; the box's volume,
+    faces and edges stay (the trim only rounds nothing off them)."""
+    from explore3d.reconstruction.carve import FIN_VOXEL_M, trim_fins
+
+    box, finned = _box_with_fin(0.001)
+    out, trimmed = trim_fins(finned)
+    assert out.is_watertight and out.body_count == 1
+    assert trimmed == pytest.approx(finned.volume - box.volume, rel=0.5)
+    assert out.bounds[1, 0] < 0.02 + 2 * FIN_VOXEL_M  # the fin gone (it reached x = 30 mm)
+    assert out.volume == pytest.approx(box.volume, rel=2e-3)
+    assert out.bounds[0] == pytest.approx(box.bounds[0], abs=1e-9)  # the other faces untouched
+
+
+def test_a_wall_thicker_than_the_fin_width_is_kept_and_a_plain_box_returned_as_it_is():
+    from explore3d.reconstruction.carve import DEFAULT_FIN_M, trim_fins
+
+    _, walled = _box_with_fin(3 * DEFAULT_FIN_M)  # 4.5 mm: thicker than the ball of radius 1.5 mm
+    out, trimmed = trim_fins(walled)
+    assert out is walled and trimmed == 0.0
+    box = trimesh.creation.box((0.04, 0.04, 0.04))
+    assert trim_fins(box) == (box, 0.0)
+
+
+def test_trimming_never_adds_volume_and_moves_with_the_mesh():
+    """The trimmed estimate lies inside the one given (it never enters free space the estimate
+    left out), and a rigid motion of the input moves the output with it (to a voxel)."""
+    from explore3d.reconstruction.carve import FIN_VOXEL_M, trim_fins
+
+    _, finned = _box_with_fin(0.001)
+    out, _ = trim_fins(finned)
+    P = out.sample(2000, seed=1)
+    inward = P - 1e-4 * out.face_normals[out.nearest.on_surface(P)[2]]
+    assert finned.contains(inward).all()
+    T = trimesh.transformations.random_rotation_matrix(np.random.default_rng(3).random(3))
+    T[:3, 3] = [0.013, -0.021, 0.007]
+    moved = finned.copy()
+    moved.apply_transform(T)
+    out_moved, _ = trim_fins(moved)
+    assert out_moved.volume == pytest.approx(out.volume, rel=5e-3)
+    back = out_moved.copy()
+    back.apply_transform(np.linalg.inv(T))
+    assert np.abs(back.bounds - out.bounds).max() < 2 * FIN_VOXEL_M
+
+
+def test_trim_fins_refuses_bad_sizes():
+    from explore3d.reconstruction.carve import trim_fins
+
+    box = trimesh.creation.box((0.04, 0.04, 0.04))
+    with pytest.raises(ValueError, match="fin_m"):
+        trim_fins(box, 0.0)
+    with pytest.raises(ValueError, match="fin_m"):
+        carve(box, [], fin_m=-1.0)

@@ -275,3 +275,58 @@ def test_docs_toml_blocks_are_configs_or_grids(path, tmp_path):
             assert read_toml_config(f)
         else:
             assert read_grid_file(f)
+
+
+# --- figures cite the BENCHMARKS section they come from (issue 43, item 4) ----------------------------
+
+BENCHMARKS = ROOT / "BENCHMARKS.md"
+CITE = re.compile(r'BENCHMARKS\.md, "([^"]+)"')
+PERCENT = re.compile(r"(\d+\.\d+)(?:-(\d+\.\d+))?%")
+
+
+def benchmarks_section(title: str) -> str:
+    """The text of BENCHMARKS.md's section whose heading contains ``title``, up to the next
+    heading of the same or a higher level ("" when none has it)."""
+    lines = BENCHMARKS.read_text(encoding="utf-8").splitlines()
+    for i, line in enumerate(lines):
+        m = re.match(r"^(#+) (.*)", line)
+        if m and title in m.group(2):
+            level = len(m.group(1))
+            end = next((j for j in range(i + 1, len(lines))
+                        if (h := re.match(r"^(#+) ", lines[j])) and len(h.group(1)) <= level), len(lines))
+            return "\n".join(lines[i:end])
+    return ""
+
+
+def cited_paragraphs(path: Path):
+    """(paragraph, [titles]) of ``path``'s paragraphs that cite BENCHMARKS.md sections."""
+    for para in re.split(r"\n\s*\n", path.read_text(encoding="utf-8")):
+        titles = CITE.findall(" ".join(para.split()))
+        if titles:
+            yield " ".join(para.split()), titles
+
+
+@pytest.mark.parametrize("path", [README, ROOT / "docs" / "user-guide.md"], ids=lambda p: p.name)
+def test_figures_name_the_benchmarks_section_they_come_from(path):
+    """Every BENCHMARKS.md section a paragraph of README.md or the user guide cites exists, and every
+    percentage that paragraph gives (a figure or a range) stands in one of the sections it cites."""
+    paragraphs = list(cited_paragraphs(path))
+    assert paragraphs, f"{path.name} cites no BENCHMARKS.md section"
+    for para, titles in paragraphs:
+        text = ""
+        for t in titles:
+            section = benchmarks_section(t)
+            assert section, f"{path.name} cites BENCHMARKS.md section {t!r}, which has no heading"
+            text += section
+        for m in PERCENT.finditer(para):
+            for figure in filter(None, m.groups()):
+                assert figure in text, (f"{path.name}: {figure}% is not in BENCHMARKS.md {titles}: "
+                                        f"...{para[max(0, m.start() - 80):m.end() + 20]}...")
+
+
+def test_a_figure_not_in_its_section_is_caught(tmp_path, monkeypatch):
+    """The check above fails on a paragraph whose figure its cited section does not hold."""
+    doc = tmp_path / "doc.md"
+    doc.write_text('The cube gives 97.13% (BENCHMARKS.md, "Current figures").\n', encoding="utf-8")
+    with pytest.raises(AssertionError, match="97.13"):
+        test_figures_name_the_benchmarks_section_they_come_from(doc)

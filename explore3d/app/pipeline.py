@@ -84,8 +84,10 @@ class Result:
         (m^2 planar, m^3 3D; ``size_unit``), ``centre_m`` and ``radius_m`` (the rough bound), and
         ``estimate_convex_hull``: the estimate's convex hull ``size`` (m^2 / m^3) and ``centre_m``
         (its centroid, world frame), what a grasp planner takes as the object's extent; carved runs
-        add ``carved_m3``, ``hull_m3`` and ``dropped_pieces_m3`` (the slivers the carving left
-        beside the estimate's body, dropped: :func:`explore3d.geometry.bodies.one_body`)."""
+        add ``carved_m3``, ``hull_m3``, ``dropped_pieces_m3`` (the slivers the carving left
+        beside the estimate's body, dropped: :func:`explore3d.geometry.bodies.one_body`) and
+        ``trimmed_fins_m3`` (the thin fins it left on the body, trimmed:
+        :func:`explore3d.reconstruction.carve.trim_fins`)."""
         e = self.error
         est = self.estimate
         if e.dim == 2:
@@ -96,7 +98,8 @@ class Result:
             hull = {"size": float(ch.volume), "centre_m": [float(x) for x in ch.center_mass]}
         carved = {} if self.carved is None else {"carved_m3": float(self.carved.carved_m3),
                                                  "hull_m3": float(self.hull.mesh.volume),
-                                                 "dropped_pieces_m3": list(self.carved.dropped_m3)}
+                                                 "dropped_pieces_m3": list(self.carved.dropped_m3),
+                                                 "trimmed_fins_m3": float(self.carved.trimmed_m3)}
         return {**exploration_summary(self.exploration), "n_points_used": self.n_points_used,
                 "estimate_convex_hull": hull, **carved,
                 "percent_error": e.percent, "iou": e.iou, "chamfer_m": e.chamfer_m, "hausdorff_m": e.hausdorff_m,
