@@ -30,7 +30,7 @@ __all__ = ["Progress", "RUN_STEPS"]
 #: the labelled steps of ``explore3d run`` after its wraps (:func:`explore3d.app.pipeline.run`,
 #: :func:`explore3d.app.report.run_and_report`)
 RUN_STEPS = ("reconstructing", "scoring", "writing")
-#: the bar: percentage over the whole command, the phase, the counted part's ``done/total unit``
+#: the bar: the phase with the counted part's "done of at most total units", the percentage over the whole command
 BAR_FORMAT = "{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]"
 
 
