@@ -26,7 +26,7 @@ def one(name: str, yaw_deg: float, detail: bool = False, register: bool = False,
         settle: str | None = None, held_load: str | None = None) -> dict:
     import trimesh
 
-    from explore3d.app.pipeline import NoContactError, ReconstructionError, run
+    from explore3d.app.pipeline import NoContactError, ReconstructionError, exploration_summary, run
     from explore3d.world.objects import load_object
     from explore3d.world.scene import SceneWatch, scene_explore_config, settle_scene
 
@@ -52,7 +52,7 @@ def one(name: str, yaw_deg: float, detail: bool = False, register: bool = False,
     wall = time.perf_counter() - t0
     s = watch.summary(res.exploration)
     force = s["touch_force_n"]
-    om = res.summary().get("object_motion", {})  # the robot's own verdict on the object's motion
+    om = exploration_summary(res.exploration).get("object_motion", {})  # the robot's own verdict on its motion
     return {"object": name, "yaw_deg": yaw_deg, "detector": cfg.control.detector,
             "settle": "press" if cfg.control.press_while_settling else "hold",
             "held_load": cfg.control.held_load_action, "register_moved": register, "percent_error": round(res.error.percent, 2),

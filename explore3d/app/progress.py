@@ -156,13 +156,12 @@ class Progress:
         changed = phase is not None and phase != self.phase
         if phase is not None:
             self.phase = phase
+        counted = "" if self.phase in self.steps or self.total is None else f" ({self._counted()})"
         if self._bar is not None:
             n, total = self._units()
             self._bar.total = total
             self._bar.n = n
-            counted = "" if self.phase in self.steps or self.total is None else f" ({self._counted()})"
             self._bar.set_description_str(f"{self.phase or ''}{counted}", refresh=False)
             self._bar.refresh()
         elif changed:  # no terminal: a line per phase
-            counted = "" if self.phase in self.steps or self.total is None else f" ({self._counted()})"
             print(f"{self.prog}: {self.phase}{counted}", file=self.stream, flush=True)

@@ -118,11 +118,7 @@ def carve(mesh, areas, voxel_m: float = DEFAULT_VOXEL_M, opening_voxels: int = D
     if not cut.any():
         return unchanged
 
-    # the tool reaches a voxel beyond the estimate where the cut meets its surface: no skin is left
-    # on the estimate's faces (the space outside it is cut for nothing)
-    cut = np.pad(cut, 1)
-    outside = np.pad(~inside.reshape(n), 1, constant_values=True)
-    cut |= ndimage.binary_dilation(cut, structure=ndimage.generate_binary_structure(3, 1)) & outside
+    cut, outside = _reach_outside(cut, inside.reshape(n))
     try:
         out = mesh.difference(_cut_tool(cut, origin, voxel_m), engine="manifold")
     except ValueError as exc:  # the tool is not a closed volume: keep the estimate uncarved, say so
@@ -134,6 +130,16 @@ def carve(mesh, areas, voxel_m: float = DEFAULT_VOXEL_M, opening_voxels: int = D
     if fin_m > 0:
         out, trimmed = trim_fins(out, fin_m)
     return dataclasses.replace(unchanged, mesh=out, carved_m3=carved, dropped_m3=dropped, trimmed_m3=trimmed)
+
+
+def _reach_outside(cut: np.ndarray, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The voxels ``cut`` (a grid's, bool) padded by one voxel and reaching one voxel beyond the
+    estimate (``inside``, the same grid) where they meet its surface, so the boolean leaves no skin
+    on its faces (the space outside is cut for nothing); and the padded outside."""
+    cut = np.pad(cut, 1)
+    outside = np.pad(~inside, 1, constant_values=True)
+    cut |= ndimage.binary_dilation(cut, structure=ndimage.generate_binary_structure(3, 1)) & outside
+    return cut, outside
 
 
 def _cut_tool(cut: np.ndarray, origin: np.ndarray, voxel_m: float):
@@ -183,9 +189,7 @@ def trim_fins(mesh, fin_m: float = DEFAULT_FIN_M, voxel_m: float = FIN_VOXEL_M) 
     fins = np.isin(labels, 1 + np.flatnonzero(deepest >= fin_m))
     if not fins.any():
         return mesh, 0.0
-    cut = np.pad(fins, 1)
-    outside = np.pad(~inside, 1, constant_values=True)
-    cut |= ndimage.binary_dilation(cut, structure=ndimage.generate_binary_structure(3, 1)) & outside
+    cut, _ = _reach_outside(fins, inside)
     try:
         out = mesh.difference(_cut_tool(cut, origin, voxel_m), engine="manifold")
     except ValueError as exc:
