@@ -68,7 +68,7 @@ def test_a_tampered_log_is_refused_in_one_line(recorded, tmp_path, capsys):
     log.q_ref[5] += 1e-3  # one reference of one step
     log.save(rec / "wrap_0003.npz")
     capsys.readouterr()
-    assert main(["reconstruct", "--log", str(rec), "--out", str(tmp_path / "e.obj")]) == 1
+    assert main(["reconstruct", "--log", str(rec), "--out", str(tmp_path / "e.obj"), "-q"]) == 1  # no progress lines
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "does not replay" in err[0] and "q_ref" in err[0]
     assert not (tmp_path / "e.obj").exists()

@@ -121,9 +121,11 @@ def test_takes_phase():
 
 
 def test_progress_with_a_phase_names_the_planned_wraps_then_each_probe_round():
-    """A three-argument progress hears each phase as it starts (with its new total) and after each
-    wrap: the planned wraps, then each round of probes, the total growing by the round's wraps (a
-    two-argument one hears only the calls after each wrap: test_run_positional_call_progress_and_result)."""
+    """A three-argument progress hears each phase as it starts and after each wrap: the contact
+    band, the planned wraps, then each round of probes, every wrap counted against the most the run
+    can make (6 planned + 2 rounds x 2 targets x 1 orientation = 10), stated from the start and
+    never changed, then reconstructing and scoring (a two-argument one hears only the calls after
+    each wrap: test_run_positional_call_progress_and_result)."""
     from explore3d.strategy.explore import ProbeConfig
 
     probes = ProbeConfig(rounds=2, targets=2, orientations=1, across=False, fingers=0, pokes=0, min_change=0.0)
@@ -133,15 +135,16 @@ def test_progress_with_a_phase_names_the_planned_wraps_then_each_probe_round():
     ex = res.exploration
     sizes = [r["wraps"] for r in ex.probe_rounds]
     assert sizes and ex.n_wraps == 6 + sum(sizes)
-    expected, done = [], 0
+    most = 10
+    expected, done = [(0, None, "contact band")], 0
     for phase, n in [("planned wraps", 6)] + [(f"probe round {k + 1} of at most 2", n) for k, n in enumerate(sizes)]:
         if phase.startswith("probe"):  # the round's targets are planned first (the bar says so)
-            expected.append((done, done, "planning " + phase))
-        total = done + n
-        expected += [(done + i, total, phase) for i in range(n + 1)]  # as it starts, then after each wrap
-        done = total
+            expected.append((done, most, "planning " + phase))
+        expected += [(done + i, most, phase) for i in range(n + 1)]  # as it starts, then after each wrap
+        done += n
     if len(sizes) < 2:  # a round planned that found nothing to run
-        expected.append((done, done, f"planning probe round {len(sizes) + 1} of at most 2"))
+        expected.append((done, most, f"planning probe round {len(sizes) + 1} of at most 2"))
+    expected += [(done, None, "reconstructing"), (done, None, "scoring")]
     assert calls == expected
 
 

@@ -196,8 +196,10 @@ def trim_fins(mesh, fin_m: float = DEFAULT_FIN_M, voxel_m: float = FIN_VOXEL_M) 
         log.warning("fins kept: their voxels gave no closed cutting volume (%s)", exc)
         return mesh, 0.0
     out, _ = one_body(out)
-    if not (out.is_watertight and out.volume > 0):
-        log.warning("fins kept: trimming them left no closed body")
+    merged = out.copy()
+    merged.merge_vertices()  # as a mesh file read back is: the cut's near-coincident vertices joined
+    if not (out.is_watertight and merged.is_watertight and out.volume > 0):
+        log.info("fins kept: trimming them left no closed body once its vertices are merged")
         return mesh, 0.0
     trimmed = float(fins.sum()) * voxel_m ** 3
     log.info("trimmed %d fin(s), %.3g m^3, from the carved estimate", int(np.count_nonzero(deepest >= fin_m)), trimmed)

@@ -38,7 +38,11 @@ __all__ = ["ESTIMATORS", "estimate", "single_centre", "convex_carved", "multi_ce
 
 
 def _carve(mesh, swept):
-    return carve(mesh, swept).mesh if swept else mesh
+    """``mesh`` carved by ``swept``, its fins kept (``fin_m=0``): these estimators also aim the
+    probe rounds (:func:`explore3d.strategy.explore.current_estimate`), whose targets and figures
+    were measured on the untrimmed carving; the run's final estimate is trimmed
+    (:func:`explore3d.app.pipeline.estimate_exploration`)."""
+    return carve(mesh, swept, fin_m=0.0).mesh if swept else mesh
 
 
 def single_centre(points, wrap, centre, radius: float, swept=(), a: float = DEFAULT_A):
