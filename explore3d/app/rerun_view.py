@@ -49,7 +49,7 @@ from explore3d.arm.spec import BASE_GAP_M
 from explore3d.core.defaults import DEFAULT_A
 from explore3d.core.interrupt import check_interrupt, import_optional
 from explore3d.core.io import atomic_path
-from explore3d.reconstruction.carve import carve
+from explore3d.reconstruction.carve import DEFAULT_FIN_M, carve
 from explore3d.reconstruction.tabletop import cut_at_table
 from explore3d.strategy.explore import hulled_contacts
 
@@ -247,7 +247,10 @@ def prefix_estimate(result: Result, k: int, a: float = DEFAULT_A, method: str = 
     wraps (:func:`~explore3d.strategy.explore.hulled_contacts`, chosen again over them alone), or
     their link points, their inverse hull carved by those wraps' swept space and cut at the
     table, as :func:`~explore3d.app.pipeline.estimate_exploration` builds the final one (wraps
-    carried back after a motion stay as the run carried them).  Closed trimesh, world frame, m.
+    carried back after a motion stay as the run carried them).  Before the last wrap the carving's
+    fins are kept, as in the estimate the probe rounds aimed at
+    (:func:`explore3d.strategy.explore.current_estimate`); after it they are trimmed, as in the
+    run's own (:func:`explore3d.reconstruction.carve.trim_fins`).  Closed trimesh, world frame, m.
 
     Raises:
         ValueError: those wraps give no hull."""
@@ -266,7 +269,8 @@ def prefix_estimate(result: Result, k: int, a: float = DEFAULT_A, method: str = 
     prefix = dataclasses.replace(ex, poses=ex.poses[:k], attempts=ex.attempts[:k], points=points, point_wrap=pw,
                                  point_attempt=pa, point_link=pl, swept=swept)
     hull = reconstruct_exploration(prefix, centre, radius, a=a, method=method)
-    est = carve(hull.mesh, swept).mesh if config.free_space else hull.mesh
+    fin_m = DEFAULT_FIN_M if k >= ex.n_wraps else 0.0
+    est = carve(hull.mesh, swept, fin_m=fin_m).mesh if config.free_space else hull.mesh
     return est if ex.table_z is None else cut_at_table(est, ex.table_z)
 
 
