@@ -45,3 +45,76 @@ def test_raw_nnls_same_numbers_as_scipy():
         x2, r2 = _nnls(A, b, 50 * k)
         assert np.array_equal(x1, x2) and r1 == r2
         assert np.array_equal(A, A0) and np.array_equal(b, b0)  # inputs untouched
+
+
+def _random_problem(rng, spec, n_contacts):
+    """A localisation problem: angles (n,) rad and noisy external torques (n,) N m of
+    ``n_contacts`` inner-face contacts."""
+    from explore3d.feeling.localise import torques_of_contacts
+    n = spec.n_links
+    q = rng.uniform(-0.4, 0.4, n) * (rng.random() < 0.5) + rng.uniform(0.0, 0.3, n)
+    links = rng.choice(n, size=n_contacts, replace=False)
+    cs = [(int(k), (rng.uniform(0.0, spec.link_length), spec.link_width / 2),
+           (rng.uniform(-0.3, 0.3), -rng.uniform(0.05, 2.0))) for k in links]
+    return q, torques_of_contacts(spec, q, cs) + rng.normal(0.0, 1e-3, n)
+
+
+def test_fitter_same_numbers_as_fit_module_and_bounds_below():
+    """_Fitter.rss is _fit_module's residual exactly; lower_bounds never exceeds it (NNLS's residual
+    is at least the unconstrained one), also with nearly parallel columns."""
+    from explore3d.feeling.localise import _Fitter, _fit_module
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        n, kb, w = 24, 2 * int(rng.integers(0, 4)), int(rng.integers(1, 3))
+        base = [rng.normal(size=(n, 2)) for _ in range(kb // 2)]
+        extras = rng.normal(size=(30, n, w))
+        if trial % 3 == 0:  # nearly parallel to a base column, or to each other
+            extras[:, :, 0] = (base[0][:, 0] if base else extras[:, :, -1]) + 1e-7 * rng.normal(size=(30, n))
+        tau = rng.normal(size=n) * 0.1
+        ridge = float(rng.choice([0.0, 2.5e-9, 1e-4]))
+        fit = _Fitter(base, w, tau, ridge=ridge)
+        lb = fit.lower_bounds(extras)
+        for e, bound in zip(extras, lb):
+            r = fit.rss(e)
+            assert r == _fit_module(base + [e], tau, ridge=ridge)[1]
+            assert bound <= r
+        assert np.all(lb == -np.inf) if ridge == 0.0 else np.all(np.isfinite(lb))
+
+
+@pytest.mark.parametrize("arm", ["default", "paper"])
+def test_localise_skipped_fits_change_nothing(arm, monkeypatch):
+    """The fits localise skips by their lower bounds would not have changed its answer: with every
+    fit made (no bounds) the contacts, intervals and residuals are the same numbers."""
+    from explore3d.feeling import localise as loc
+    spec = load_arm(arm)
+    rng = np.random.default_rng(8)
+    problems = [_random_problem(rng, spec, int(rng.integers(1, 4))) for _ in range(40)]
+    fast = [loc.localise(spec, q, tau, position_sigma_m=1e-4 * (i % 2)) for i, (q, tau) in enumerate(problems)]
+    monkeypatch.setattr(loc._Fitter, "lower_bounds", lambda self, extras: np.full(len(extras), -np.inf))
+    full = [loc.localise(spec, q, tau, position_sigma_m=1e-4 * (i % 2)) for i, (q, tau) in enumerate(problems)]
+    for a, b in zip(fast, full):
+        assert a.rss == b.rss and np.array_equal(a.predicted, b.predicted)
+        assert [(c.link, c.kind) for c in a.contacts] == [(c.link, c.kind) for c in b.contacts]
+        for ca, cb in zip(a.contacts, b.contacts):
+            assert np.array_equal(ca.point_world, cb.point_world) and np.array_equal(ca.force_world, cb.force_world)
+            assert np.array_equal(ca.along_interval_m, cb.along_interval_m, equal_nan=True)
+
+
+def test_feed_forward_recomputed_only_when_the_reading_changes():
+    """The controller's gravity feed-forward is gravity_torques at the reading's angles, the same
+    numbers whether it was kept from the step before (unchanged angles) or computed again."""
+    from types import SimpleNamespace
+    from explore3d.strategy.encircle import ControlConfig, Controller
+    spec = load_arm("default")
+    T = spatial_wrap_poses([0.0, 0.0, 0.0], 0.07, spec.link_width, 4, 1, 1)[1].T_world_base
+    g = np.array([0.0, 0.0, -9.81])
+    ctl = Controller(SimpleNamespace(spec=spec, gravity=g), ControlConfig(), T)
+    rng = np.random.default_rng(2)
+    q1, q2 = rng.uniform(-0.3, 0.3, (2, spec.n_links))
+    a = ctl._feed_forward(q1)
+    assert np.array_equal(a, -gravity_torques(spec, q1, T, g))
+    assert ctl._feed_forward(q1.copy()) is a  # the same angles: kept
+    b = ctl._feed_forward(q2)
+    assert np.array_equal(b, -gravity_torques(spec, q2, T, g)) and not np.array_equal(a, b)
+    with pytest.raises(ValueError):
+        a[0] = 1.0  # read only: a caller cannot change what the next step reuses

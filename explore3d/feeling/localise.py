@@ -33,7 +33,10 @@ distal joint with a significant torque, refit every chosen contact jointly (NNLS
 candidate that lowers the residual sum of squares the most, and stop when the drop is below
 ``chi2_gain * sigma^2`` (a significance threshold from the torque noise ``sigma``).  Then each chosen
 contact is re-chosen with the others fixed (a few swap passes), and contacts whose removal costs
-less than the threshold are dropped.
+less than the threshold are dropped.  Each round first bounds every candidate's residual from below
+by the unconstrained least squares one (a few vectorised projections) and fits only those whose
+bound could beat the round's best: the same choice as fitting them all, in a fraction of the fits
+(measured on the default cube, one run: 2.23 million fits before, 0.31 million after).
 
 Uncertainty.  From the fit's covariance ``sigma^2 (A^T A)^-1`` on the active generators, propagated
 to the arc position along the face (about ``sigma / |F|`` in scale: what a reading resolves).
@@ -87,8 +90,23 @@ def link_outline(spec: ArmSpec):
     return c, faces
 
 
+_GENERATORS: dict = {}
+
+
 def _generators(spec: ArmSpec, kind: str):
-    """The two generators (point (2,), unit force (2,)) of a candidate kind, link frame."""
+    """The two generators (point (2,), unit force (2,)) of a candidate kind, link frame (kept, read
+    only, per (spec, kind): a localisation asks for them hundreds of times)."""
+    key = (spec, kind)
+    if key not in _GENERATORS:
+        gens = _make_generators(spec, kind)
+        for pt, f in gens:
+            pt.flags.writeable = False
+            f.flags.writeable = False
+        _GENERATORS[key] = gens
+    return _GENERATORS[key]
+
+
+def _make_generators(spec: ArmSpec, kind: str):
     c, faces = link_outline(spec)
     if kind in faces:
         a, b, n = faces[kind]
@@ -238,6 +256,74 @@ def _ridge_rows(ridge: float, k: int) -> np.ndarray:
     return _RIDGE_ROWS[key]
 
 
+class _Fitter:
+    """:func:`_fit_module` of ``base + [extra]`` for many ``extra`` of one width, the same numbers:
+    the design matrix (base columns, ridge rows) and the padded torques are built once and only the
+    extra columns are written per fit (a localisation makes thousands of such fits)."""
+
+    def __init__(self, base: list, width: int, tau: np.ndarray, fmax: float = MAX_FORCE_N, ridge: float = 0.0):
+        n = len(tau)
+        kb = sum(c.shape[1] for c in base)
+        k = kb + width
+        rows = n + k if ridge > 0 else n
+        self.A = np.zeros((rows, k))
+        if base:
+            np.concatenate(base, axis=1, out=self.A[:n, :kb])
+        if ridge > 0:
+            self.A[n:] = _ridge_rows(ridge, k)
+            self.t = np.concatenate([np.asarray(tau, dtype=np.float64), np.zeros(k)])
+        else:
+            self.t = np.asarray(tau, dtype=np.float64)
+        self.n, self.kb, self.maxiter, self.fmax = n, kb, 50 * k, fmax
+
+    def rss(self, extra: np.ndarray) -> float:
+        """The residual sum of squares with ``extra`` (n, width) as the last columns (inf past fmax)."""
+        self.A[: self.n, self.kb:] = extra
+        x, rnorm = _nnls(self.A, self.t, self.maxiter)
+        if max(x.tolist()) > self.fmax:
+            return float("inf")
+        return float(rnorm * rnorm)
+
+    def lower_bounds(self, extras: np.ndarray) -> np.ndarray:
+        """(m,) a lower bound on :meth:`rss` of each of ``extras`` (m, n, width), less a safety margin.
+
+        The unconstrained least squares residual of the same design matrix (NNLS's feasible set is
+        smaller, the force cap only raises it), minus ``1e-9 * |t|^2`` (far above its rounding:
+        the ridge rows bound the matrix's condition number, and the margin grows with that bound).  So a candidate whose bound exceeds
+        a threshold cannot fit below it: :func:`localise` skips those fits and chooses exactly
+        what fitting all of them would.  Without a ridge, no bound (-inf).
+        """
+        m, n, kb = len(extras), self.n, self.kb
+        if self.A.shape[0] == n:  # no ridge: the matrix may be singular, no safe bound
+            return np.full(m, -np.inf)
+        E = np.zeros((m, self.A.shape[0], extras.shape[2]))
+        E[:, :n] = extras
+        E[:, n + kb:] = self.A[n + kb:, kb:]
+        r0 = self.t
+        if kb:  # project the base columns out (twice: classical Gram-Schmidt's re-orthogonalisation)
+            Q = np.linalg.qr(self.A[:, :kb])[0]
+            r0 = r0 - Q @ (Q.T @ r0)
+            r0 = r0 - Q @ (Q.T @ r0)
+            for _ in range(2):
+                E = E - Q @ (Q.T @ E)
+        drop = np.zeros(m)
+        for j in range(E.shape[2]):  # orthonormalise the extra columns in turn (again twice)
+            u = E[:, :, j]
+            for i in range(j):
+                for _ in range(2):
+                    u = u - np.sum(E[:, :, i] * u, axis=1)[:, None] * E[:, :, i]
+            u = u / np.linalg.norm(u, axis=1)[:, None]
+            E[:, :, j] = u
+            drop += (u @ r0) ** 2
+        # the margin: far above the rounding of these projections, which grows with the matrix's
+        # condition number (at most its Frobenius norm over the ridge's singular value floor)
+        ridge_sv = float(self.A[n + kb, kb]) if extras.shape[2] else 1.0
+        frob = np.sqrt(float(np.sum(self.A[:, :kb] ** 2)) + float(np.max(np.sum(extras ** 2, axis=(1, 2)))))
+        rel = max(1e-9, 1e4 * np.finfo(float).eps * frob / ridge_sv)
+        lb = float(r0 @ r0) - drop - rel * float(self.t @ self.t)
+        return np.where(np.isnan(lb), -np.inf, lb)  # never a reason to skip a fit
+
+
 def _fit_module(cols: list, tau: np.ndarray, fmax: float = MAX_FORCE_N, ridge: float = 0.0):
     if not cols:
         return np.zeros(0), float(tau @ tau)
@@ -318,6 +404,12 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
     if links is not None:
         cand = [c for c in cand if c[0] in set(links)]
     cap = n if max_contacts is None else max_contacts
+    stacked = []
+
+    def cand_cols():  # (len(cand), n, 2) every candidate's columns
+        if not stacked:
+            stacked.append(np.stack([col(c) for c in cand]) if cand else np.zeros((0, n, 2)))
+        return stacked[0]
 
     def rss_of(cs):
         return _fit([col(c) for c in cs], tau)[1]
@@ -326,12 +418,14 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
         """Re-choose contact m of cs with the others fixed; returns (cs, rss)."""
         others = cs[:m] + cs[m + 1:]
         used = {c[0] for c in others}
-        base = [col(c) for c in others]
+        fit = _Fitter([col(c) for c in others], 2, tau, ridge=ridge)
+        lb = fit.lower_bounds(cand_cols())
         best, best_r = cs[m], r
-        for c in cand:
-            if c[0] in used or c == cs[m]:
+        for i in np.flatnonzero(lb < r - 1e-18).tolist():  # best_r only falls: the others never win
+            c = cand[i]
+            if c[0] in used or c == cs[m] or not lb[i] < best_r - 1e-18:
                 continue
-            rr = _fit(base + [col(c)], tau)[1]
+            rr = fit.rss(col(c))
             if rr < best_r - 1e-18:
                 best, best_r = c, rr
         return others[:m] + [best] + others[m:], best_r
@@ -362,12 +456,20 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
     rss = rss0
     while len(chosen) < cap:
         used = {c[0] for c in chosen}
-        base = [col(c) for c in chosen]
+        fit = _Fitter([col(c) for c in chosen], 2, tau, ridge=ridge)
+        lb = fit.lower_bounds(cand_cols())
+        free = [i for i, c in enumerate(cand) if c[0] not in used]
+        # the first best of the scan below, found sooner: the candidate of the lowest bound fitted
+        # first, then only those whose bound is below both (the others fit worse than it)
+        first = min(free, key=lambda i: lb[i]) if free else None
+        known = {first: fit.rss(col(cand[first]))} if free else {}
+        cut = min(rss, known.get(first, rss))
         best, best_rss = None, rss
-        for c in cand:
-            if c[0] in used:
+        for i in free:
+            if not lb[i] <= cut:
                 continue
-            r = _fit(base + [col(c)], tau)[1]
+            c = cand[i]
+            r = known[i] if i in known else fit.rss(col(c))
             if r < best_rss:
                 best, best_rss = c, r
         if best is None or rss - best_rss < thresh_of(chosen + [best]):
@@ -410,22 +512,32 @@ def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0
         F = R @ np.array([0.0, -1.0])
         origins = Tl[: link + 1, :2, 3]
         best = _fit(base + [col(chosen[m])], tau)[1]
-        ok = [x_est]
         # the inner face's point at every x at once: (len(prof_x), n) joint torques of a unit force
         P = (R @ np.stack([prof_x, np.full(len(prof_x), spec.link_width / 2)])).T + o
         r = P[:, None, :] - origins[None, :, :]
         C = np.zeros((len(prof_x), n, 1))
         C[:, : link + 1, 0] = r[..., 0] * F[1] - r[..., 1] * F[0]
-        for x, c1 in zip(prof_x, C):
-            cols = [c1]
+        fit1, fit2 = _Fitter(base, 1, tau, ridge=ridge), _Fitter(base, 2, tau, ridge=ridge)
+        limit = best + profile_chi2 * sigma_nm ** 2
+        lb = fit1.lower_bounds(C)  # the points whose bound passes the limit cannot fit
+
+        def fits(i):  # the point at prof_x[i] (the corners' cones at the ends) fits within the limit
+            x = prof_x[i]
             if x == 0.0:
-                cols = [col((link, "corner_pi"))]
+                rr = fit2.rss(col((link, "corner_pi")))
             elif x == spec.link_length:
-                cols = [col((link, "corner_di"))]
-            rr = _fit(base + cols, tau)[1]
-            if rr <= best + profile_chi2 * sigma_nm ** 2:
-                ok.append(x)
-        return min(ok), max(ok)
+                rr = fit2.rss(col((link, "corner_di")))
+            elif not lb[i] <= limit:
+                return False
+            else:
+                rr = fit1.rss(C[i])
+            return rr <= limit
+
+        # the interval is min and max of x_est and the points that fit: scanned inwards from each
+        # end up to x_est, the first that fits decides that side (the points beyond cannot change it)
+        lo = next((float(prof_x[i]) for i in range(len(prof_x)) if prof_x[i] < x_est and fits(i)), x_est)
+        hi = next((float(prof_x[i]) for i in range(len(prof_x) - 1, -1, -1) if prof_x[i] > x_est and fits(i)), x_est)
+        return lo, hi
 
     contacts = []
     H = spec.link_height

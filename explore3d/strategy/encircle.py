@@ -435,6 +435,7 @@ class Controller:
         self.reading: JointReading | None = None
         self.sweep_q: collections.deque = collections.deque(maxlen=SELF_CONTACT_WINDOW_STEPS)  # the sweep's last angles
         self.steps = 0
+        self._ff = None  # (angles, feed-forward) of the last step
         self.traj, self.traj_ref, self.traj_joint = ([], [], []) if record else (None, None, None)
 
     def start(self, q0=None) -> np.ndarray:
@@ -446,13 +447,21 @@ class Controller:
     def send(self, q_ref, dq_ref=None, limits=None) -> np.ndarray:
         """One control step: references (n,) rad, velocity feed-forward (n,) rad/s (default 0),
         torque limits (n,) N m (default the arm's); returns the reading's angles (n,), rad."""
-        ff = (-gravity_torques(self.spec, self.reading.q, self.T, self.robot.gravity) if self.compensate
-              else self.zero)
+        ff = self._feed_forward(self.reading.q) if self.compensate else self.zero
         cmd = JointCommand(q_ref=q_ref.copy(), dq_ref=self.zero if dq_ref is None else dq_ref.copy(),
                            torque_limit=self.full if limits is None else limits, tau_ff=ff)
         self.reading = self.robot.step(cmd)
         self.steps += 1
         return self.reading.q
+
+    def _feed_forward(self, q: np.ndarray) -> np.ndarray:
+        """(n,) the gravity feed-forward, N m, at the reading's angles ``q`` (n,), rad: computed again
+        only when the reading changes (quantised encoders repeat while a joint is still)."""
+        if self._ff is None or not np.array_equal(q, self._ff[0]):
+            ff = -gravity_torques(self.spec, q, self.T, self.robot.gravity)
+            ff.flags.writeable = False
+            self._ff = (q.copy(), ff)
+        return self._ff[1]
 
     def hold(self, q_ref) -> np.ndarray:
         """Hold ``q_ref`` for ``settle_steps`` steps; returns the last reading's angles."""
