@@ -79,6 +79,18 @@ def test_fitter_same_numbers_as_fit_module_and_bounds_below():
             assert r == _fit_module(base + [e], tau, ridge=ridge)[1]
             assert bound <= r
         assert np.all(lb == -np.inf) if ridge == 0.0 else np.all(np.isfinite(lb))
+    assert _Fitter([], 2, np.ones(24), ridge=1e-4).lower_bounds(np.zeros((0, 24, 2))).shape == (0,)
+
+
+def test_localise_with_no_candidate_on_the_links_allowed():
+    """Torques only the proximal joints see, and contacts allowed on the tip alone (as
+    contacts.localise_moment's second try asks): no candidate, no contact, no error."""
+    from explore3d.feeling.localise import localise, torques_of_contacts
+    spec = load_arm("default")
+    q = np.full(spec.n_links, 0.05)
+    tau = torques_of_contacts(spec, q, [(2, (0.5 * spec.link_length, spec.link_width / 2), (0.0, -1.0))])
+    loc = localise(spec, q, tau, links=(spec.n_links - 1,))
+    assert loc.contacts == () and loc.rss == loc.rss0
 
 
 @pytest.mark.parametrize("arm", ["default", "paper"])

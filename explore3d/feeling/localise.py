@@ -294,7 +294,7 @@ class _Fitter:
         what fitting all of them would.  Without a ridge, no bound (-inf).
         """
         m, n, kb = len(extras), self.n, self.kb
-        if self.A.shape[0] == n:  # no ridge: the matrix may be singular, no safe bound
+        if self.A.shape[0] == n or m == 0:  # no ridge: the matrix may be singular, no safe bound
             return np.full(m, -np.inf)
         E = np.zeros((m, self.A.shape[0], extras.shape[2]))
         E[:, :n] = extras
