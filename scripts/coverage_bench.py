@@ -12,7 +12,7 @@ rerun does only what is missing; a failure (no contact, no hull, ...) is recorde
 its reason and the run goes on.  With ``--save`` the exploration's hull points
 (``OUT/OBJECT.LABEL/points.ply``, as ``explore3d run`` writes them), its free space
 (``free_space.npz``) and the ideal skin's points (``skin.npz``: points, wrap, loaded) are kept
-too, for estimators measured on the same contacts (scripts/estimator_study.py).  Each file also holds a reference, "dense samples": the same
+too, for estimators measured on the same contacts (scripts/studies/estimator_study.py).  Each file also holds a reference, "dense samples": the same
 inverse hull (a = DEFAULT_A, about the rough centre) of 5000 points sampled uniformly on the true
 surface (seed 0) -- what the estimator could give if the arm touched everywhere.
 

@@ -2,7 +2,7 @@
 so the command line reads them without loading numpy).  One value per concept."""
 
 #: The inverse hull's default coarseness ``a`` everywhere except the paper replica.  Measured on
-#: the default arm's 3D cube runs and in ``scripts/parameter_study.py``: smaller ``a`` follows
+#: the default arm's 3D cube runs and in ``scripts/studies/parameter_study.py``: smaller ``a`` follows
 #: corners tighter; 0.05 cuts a dense square's corners by 0.4 % of its area (explore3d.geometry.hull).
 DEFAULT_A = 0.05
 

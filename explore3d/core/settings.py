@@ -73,7 +73,7 @@ class SimConfig:
             free body resting on a table with friction makes it degenerate (four corner contacts
             and their friction rows for three degrees of freedom), the solve fails and PyBullet
             falls back to a few sequential-impulse iterations for the whole world, the arm's joint
-            motors included.  Measured (``scripts/physics_study.py``): the default arm swinging in
+            motors included.  Measured (``scripts/studies/physics_study.py``): the default arm swinging in
             free space beside a resting 80 mm cube tracked its reference within 313 mrad and read
             torques of up to 2.1 N m, against 3.9 mrad and 0.09 N m with no object; with 1e-7, 1e-6 or
             1e-5 the torques are the empty world's, bit for bit.  The table scene sets 1e-6

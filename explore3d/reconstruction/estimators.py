@@ -18,7 +18,7 @@ free space, each a closed mesh (trimesh, metres, world frame):
   ``reach_m`` from every contact take the carved single-centre estimate's inside/outside.
 
 Pure functions on numpy arrays; lengths in metres.  The paper's inverse hull stays the default
-(``explore3d reconstruct``'s and the pipeline's); scripts/estimator_study.py measures these.
+(``explore3d reconstruct``'s and the pipeline's); scripts/studies/estimator_study.py measures these.
 """
 from __future__ import annotations
 

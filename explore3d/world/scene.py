@@ -161,11 +161,11 @@ def scene_explore_config(name: str = "table", spec=None, detector: str | None = 
 
     Why link points: the gentle sweeps press with a few tens of mN, and the localisation's
     precision is the torque noise over the force (the profile width about 3 mm at 0.25 N even
-    with averaged readings; ``scripts/table_uncertainty_study.py`` on the resting cube: 2 of 703
+    with averaged readings; ``scripts/studies/table_uncertainty_study.py`` on the resting cube: 2 of 703
     contacts within the hull's 0.5 mm; the hull of all of them 28.4% volume error, of those within
     2-5 mm 32-36%, the link points 17.1%).  Probes aim at the localised estimate, so none.
 
-    Why the solver (``scripts/physics_study.py``, BENCHMARKS "Table scene: the solver"): with a
+    Why the solver (``scripts/studies/physics_study.py``, BENCHMARKS "Table scene: the solver"): with a
     body resting on the table by friction, PyBullet's Dantzig MLCP, which spans the whole world, is
     degenerate and falls back to sequential impulses for every constraint, the arm's motors
     included: a swing in free space 11 mm above the cube lags its reference by up to 313 mrad

@@ -235,7 +235,7 @@ def simulated_case(shape, n_links: int = 320, link_length: float = 0.008, points
     The defaults are the paper's numbers (320 links, 8 mm, a = 0.2).  The paper does not say
     how finely it discretised the links; 5 points per link (2 mm spacing, the link's ends and
     quarter points) is our choice.  On the 80 mm square the error hardly depends on it (links
-    along an edge are collinear), see ``scripts/parameter_study.py``.
+    along an edge are collinear), see ``scripts/studies/parameter_study.py``.
     """
     k = int(points_per_link)
     rng = np.random.default_rng(seed)

@@ -3,8 +3,8 @@ exploration with localised contacts, then the hull rebuilt from the same contact
 limits on their stated uncertainty, and from the paper's link points, each scored against the
 resting object (BENCHMARKS.md, "Table scene: the hull's input").
 
-    python scripts/table_uncertainty_study.py --object cube --limits 0.5 1 2 3 5 --out /tmp/unc.jsonl
-    python scripts/table_uncertainty_study.py --object cube --detector stall --out /tmp/unc.jsonl  # the baseline
+    python scripts/studies/table_uncertainty_study.py --object cube --limits 0.5 1 2 3 5 --out /tmp/unc.jsonl
+    python scripts/studies/table_uncertainty_study.py --object cube --detector stall --out /tmp/unc.jsonl  # the baseline
 
 The exploration is ``scene_explore_config("table", points="contacts")`` (the table scene's
 solver, controller and force budget); only the hull's input changes between rows, so the rows

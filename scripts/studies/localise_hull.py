@@ -7,7 +7,7 @@ contacts localised from the joint torques at the end of each detection's settle 
 points, with their wrap ids), and the ideal skin (PyBullet's contact points at the same readings);
 each point set is hulled the same way (explore3d.reconstruction.hull_input.reconstruct_points) and scored.
 
-    python3 scripts/localise_hull.py --objects cube cylinder --settle 30
+    python3 scripts/studies/localise_hull.py --objects cube cylinder --settle 30
 """
 from __future__ import annotations
 

@@ -21,7 +21,7 @@ measured bands.  Without ``--rereference`` the held joints keep full-torque hold
 controller); the current default re-references them.
 
 Usage (from the repository root):
-    python3 scripts/margin_study.py --objects cube sphere --margins none 1e-3 3e-4 1e-4 3e-5 0 \
+    python3 scripts/studies/margin_study.py --objects cube sphere --margins none 1e-3 3e-4 1e-4 3e-5 0 \
         --out margin_study/results.jsonl
 Pairs already in the results file are skipped unless --repeat is given (then the run is appended
 again, tagged with its repeat index, for the determinism check).

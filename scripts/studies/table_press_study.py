@@ -2,7 +2,7 @@
 contacts localise on a resting object, with and without a press at a chosen force and averaged
 readings, and does the press move the object?  (BENCHMARKS.md, "Table scene: contact at a known force")
 
-    python scripts/table_press_study.py --object cube --variants gentle press avg press+avg --out /tmp/press.jsonl
+    python scripts/studies/table_press_study.py --object cube --variants gentle press avg press+avg --out /tmp/press.jsonl
 
 Each variant runs the table scene's first wraps (``--heights`` horizontal heights x ``--angles``
 approach directions, ``--normals`` tilted planes; the table scene's controller otherwise) on the

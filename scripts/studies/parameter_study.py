@@ -14,7 +14,7 @@ The simulated contacts are exact (no joint noise, links flush with the surface),
 a values that win here may not carry over to measured data: the paper notes that a lower a
 "improves the error for the simulated case but increases the error for the experimental
 results".  Seeded (seeds 0..--seeds-1); public API only.  Usage:
-    python scripts/parameter_study.py [--out runs/parameter_study] [--seeds 2] [--quick]
+    python scripts/studies/parameter_study.py [--out runs/parameter_study] [--seeds 2] [--quick]
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 try:
     import explore3d  # noqa: F401
 except ImportError:  # running from a checkout without installing the package

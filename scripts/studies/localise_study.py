@@ -9,8 +9,8 @@ reading reflects (the physics step ``delay_steps`` earlier).
 Moments: ``settle`` = the last settle step after each detection (Attempt.detect_step[k]);
 ``detect`` = the detection step itself (the chain still moving).
 
-    python3 scripts/localise_study.py --objects cube cylinder --mode planar --out /tmp/loc_planar.json
-    python3 scripts/localise_study.py --summarise /tmp/loc_planar.json
+    python3 scripts/studies/localise_study.py --objects cube cylinder --mode planar --out /tmp/loc_planar.json
+    python3 scripts/studies/localise_study.py --summarise /tmp/loc_planar.json
 """
 from __future__ import annotations
 

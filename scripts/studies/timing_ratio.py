@@ -2,7 +2,7 @@
 after a small warm-up run (imports, band cache).  Run it on two commits one after the other and
 compare the ratios (BENCHMARKS.md, first section):
 
-    python scripts/timing_ratio.py            # prints JSON {object: {wall_s, steps, total_s}}
+    python scripts/studies/timing_ratio.py            # prints JSON {object: {wall_s, steps, total_s}}
 """
 import sys, time, json
 from explore3d import ExploreConfig, load_object

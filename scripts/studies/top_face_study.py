@@ -2,7 +2,7 @@
 (issue 23, item 2: "measure which wraps touch the top face today").  EVALUATION ONLY: the truth
 (the settled cube) is read after the run.
 
-    python scripts/top_face_study.py --object cube --out /tmp/top.json
+    python scripts/studies/top_face_study.py --object cube --out /tmp/top.json
 
 Per kind of wrap (horizontal, tilted), the contacts found (all and those the hull used) and how
 many lie on the top face (within ``--tol`` of the top plane, inside its outline shrunk by the

@@ -1,7 +1,7 @@
 """The physics measured, not assumed (issue 23, item 4): does the solver keep the arm's joints as
 tight beside a resting object as in an empty world?  (BENCHMARKS.md, "Table scene: the solver")
 
-    python scripts/physics_study.py --objects cube cylinder --out /tmp/physics.jsonl
+    python scripts/studies/physics_study.py --objects cube cylinder --out /tmp/physics.jsonl
 
 The default arm (5% mass error) lies straight and horizontal ``--gap`` above the object's top
 face, clear of it, and swings joints 0 and 5 by 0.3 rad at 0.5 Hz under position control at the

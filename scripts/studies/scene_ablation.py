@@ -1,6 +1,6 @@
 """The table scene's ablation: each idealisation turned on in turn (BENCHMARKS.md, "Table scene").
 
-    python scripts/scene_ablation.py --objects cube cylinder l_block --out /tmp/ablation.jsonl
+    python scripts/studies/scene_ablation.py --objects cube cylinder l_block --out /tmp/ablation.jsonl
 
 Rows (each from the table scene as ``explore3d run --scene table`` runs it, one change at a time):
 ``table`` (resting, friction 0.5, 5% mass error, persistent), ``fixed`` (the object fixed in place),

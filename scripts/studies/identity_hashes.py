@@ -6,8 +6,8 @@ mesh (estimate.obj) and report.json's error in percent.  Run it before a change 
 hashes and after it to check them (same machine, same pinned versions: the chain's contact
 dynamics amplify rounding, so another machine gives other bits, see BENCHMARKS.md):
 
-    python scripts/identity_hashes.py --record identity.json     # on the commit before
-    python scripts/identity_hashes.py --check identity.json      # after: exit 1 if any differs
+    python scripts/studies/identity_hashes.py --record identity.json     # on the commit before
+    python scripts/studies/identity_hashes.py --check identity.json      # after: exit 1 if any differs
 """
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 Planar mode, the paper arm (4 x 110 mm links, 40 mm wide), 4 attempts per wrap, a = 0.2.
 Writes table1_study/results.json and PNGs in table1_study/ (in the current folder):
 
-    python scripts/table1_study.py [--quick]
+    python scripts/studies/table1_study.py [--quick]
 
 Sections (keys of results.json):
   baseline    Table I rows as the package gives them, with the error split into over-estimate
@@ -46,7 +46,7 @@ from explore3d.geometry.metrics import shape_error
 from explore3d.world.objects import cylinder, load_object
 from explore3d.app.pipeline import reconstruct_exploration, run
 
-OUT = Path(__file__).resolve().parent.parent / "table1_study"
+OUT = Path(__file__).resolve().parents[2] / "table1_study"
 A = 0.2
 ARM = "paper"
 HALF = {"cube": 0.04, "cylinder": 0.063, "cylinder_d63": 0.0315}  # near-side distance from the centre, m

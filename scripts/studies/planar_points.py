@@ -1,7 +1,7 @@
 """Planar default runs (3 directions x 4 attempts) of every built-in object, hulled from the paper's
 link points and from the localised contacts: area error and point counts (BENCHMARKS.md).
 
-    python scripts/planar_points.py
+    python scripts/studies/planar_points.py
 """
 from explore3d import ExploreConfig, load_object
 from explore3d.app.pipeline import run

@@ -1,6 +1,6 @@
 """Estimators measured on the same contacts and free space (issue 11, item 5).
 
-    python scripts/estimator_study.py DIR [--label probes] [--objects NAME ...] [--out study.json]
+    python scripts/studies/estimator_study.py DIR [--label probes] [--objects NAME ...] [--out study.json]
 
 Reads what ``scripts/coverage_bench.py --save`` kept in ``DIR/OBJECT.LABEL/`` (points.ply with the
 localised contacts and their normals, free_space.npz, skin.npz) and ``DIR/OBJECT.LABEL.json`` (the
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # scripts/: coverage_bench
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # scripts/: coverage_bench
 
 from coverage_bench import GROUPS, load  # noqa: E402
 

@@ -2,7 +2,7 @@
 with free space and probes (the default), with free space only (probes=None) and with neither
 (the straight sweeps' hull, as before issue 11), one after the other in this process (2 jobs):
 
-    python scripts/probe_cost.py [OBJECT ...]        # default: cube; prints JSON per object and setting
+    python scripts/studies/probe_cost.py [OBJECT ...]        # default: cube; prints JSON per object and setting
 
 Ratios of the wall times within one run are what to compare (the machine is shared).
 """

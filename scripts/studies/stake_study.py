@@ -2,7 +2,7 @@
 contact against its true distance from the object (issue 24, item 1: "targets by what is at
 stake").  EVALUATION ONLY: the truth is read after the run.
 
-    python scripts/stake_study.py --objects bunny torus --out /tmp/stake.json
+    python scripts/studies/stake_study.py --objects bunny torus --out /tmp/stake.json
 
 Per object of the fixed non-convex set (``scripts/nonconvex_set.py``): the README's default run
 (ideal scene), then ``--samples`` surface samples of the estimate (seeded) and for each its
@@ -19,7 +19,7 @@ import json
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # scripts/
 
 
 def one(name: str, samples: int) -> dict:
