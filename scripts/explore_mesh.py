@@ -5,7 +5,8 @@
 PATH is a mesh file (STL, OBJ, PLY, OFF, GLB, ...) or ``pybullet_data:NAME`` (e.g.
 ``pybullet_data:duck_vhacd.obj --size 0.1``).  The robot is told only the mesh's rough centre and
 radius.  Writes the estimate mesh, estimate.urdf, points.ply, pictures and summary.json into
-``--out`` (default ``runs/<file name>``, ``runs/<file name>-quick`` with ``--quick``).  The other ``explore_*.py`` scripts share
+``--out`` (default ``runs/<file name>``, ``runs/<file name>-quick`` with ``--quick``); shows the
+progress on stderr (``-q``: none).  The other ``explore_*.py`` scripts share
 :func:`options`, :func:`explore_object` and :func:`one_line_errors` from here; everything else is the public API.
 """
 import argparse
@@ -37,6 +38,7 @@ def options(description: str) -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="a small exploration that runs in seconds (planar: 3 directions x 4 attempts; "
                         "3d: 8 planes, 1 angle, no probes: 8 wraps) into its own folder (default runs/<name>-quick)")
     p.add_argument("--no-pictures", action="store_true", help="skip the PNG pictures")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress display (the result line still prints)")
     return p
 
 
@@ -66,10 +68,16 @@ def default_out(name: str, args) -> str:
 
 
 def explore_object(name: str, mesh, args, out) -> dict:
-    """Run, write the files and summary.json into ``out``, print one line; returns the summary."""
-    with quiet_c_output():  # PyBullet's C-level banners; Python's own output still shows
-        res = run(mesh, args.arm, exploration_config(args), a=args.a, seed=args.seed)
+    """Run, write the files and summary.json into ``out``, print one line; returns the summary.
+    Shows the command line's progress display on stderr (one bar, or a line per phase when stderr
+    is not a terminal; none with ``--quiet``)."""
+    from explore3d.app.progress import RUN_STEPS, Progress
+
+    with quiet_c_output(), Progress(RUN_STEPS, enabled=not args.quiet, prog=Path(sys.argv[0]).stem) as progress:
+        res = run(mesh, args.arm, exploration_config(args), a=args.a, seed=args.seed, progress=progress)
+        progress.step("writing")
         files = write_result(res, mesh, out, pictures=not args.no_pictures)
+        progress.finish()
     summary = {"object": name, "mode": args.mode, "arm": args.arm, "a": args.a, "seed": args.seed,
                "quick": args.quick, **res.summary(), "files": files + ["summary.json"]}
     Path(out, "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")

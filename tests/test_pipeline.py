@@ -248,7 +248,17 @@ def test_explore_cube_script_end_to_end(tmp_path):
     # no PyBullet banner on either stream (explore3d.quiet_c_output)
     for banner in PYBULLET_BANNERS:
         assert banner not in r.stdout and banner not in r.stderr, banner
-    assert r.stderr == ""
+    # stderr is not a terminal: the progress is one line per phase, up to writing, and nothing else
+    phases = r.stderr.splitlines()
+    assert phases and all(ln.startswith("explore_cube: ") for ln in phases), r.stderr
+    assert "explore_cube: reconstructing" in phases and phases[-1] == "explore_cube: writing", r.stderr
+
+
+def test_explore_script_quiet_shows_no_progress(tmp_path):
+    r = _script("explore_cube.py", "--quick", "--mode", "planar", "--out", str(tmp_path / "c"), "--no-pictures", "-q",
+                cwd=tmp_path)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    assert r.stdout.startswith("cube: ")
 
 
 # --- the outlier filter of the reconstruction --------------------------------------------------------
