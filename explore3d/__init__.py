@@ -40,6 +40,7 @@ _EXPORTS = {
     "settle_scene": "world.scene", "scene_explore_config": "world.scene",
     "GripperSpec": "grasp.gripper", "GraspSet": "grasp.antipodal", "sample_grasps": "grasp.antipodal",
     "execute_grasps": "world.grasping", "grasp_run": "app.grasp",
+    "Progress": "app.progress", "RUN_STEPS": "app.progress",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -15,7 +15,7 @@ import json
 import sys
 from pathlib import Path
 
-from explore3d import ExploreConfig, load_object, quiet_c_output, run, write_result
+from explore3d import RUN_STEPS, ExploreConfig, Progress, load_object, quiet_c_output, run, write_result
 from explore3d.core.defaults import DEFAULT_A
 
 
@@ -71,8 +71,6 @@ def explore_object(name: str, mesh, args, out) -> dict:
     """Run, write the files and summary.json into ``out``, print one line; returns the summary.
     Shows the command line's progress display on stderr (one bar, or a line per phase when stderr
     is not a terminal; none with ``--quiet``)."""
-    from explore3d.app.progress import RUN_STEPS, Progress
-
     with quiet_c_output(), Progress(RUN_STEPS, enabled=not args.quiet, prog=Path(sys.argv[0]).stem) as progress:
         res = run(mesh, args.arm, exploration_config(args), a=args.a, seed=args.seed, progress=progress)
         progress.step("writing")
