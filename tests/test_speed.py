@@ -59,9 +59,22 @@ def _random_problem(rng, spec, n_contacts):
     return q, torques_of_contacts(spec, q, cs) + rng.normal(0.0, 1e-3, n)
 
 
-def test_fitter_same_numbers_as_fit_module_and_bounds_below():
-    """_Fitter.rss is _fit_module's residual exactly; lower_bounds never exceeds it (NNLS's residual
-    is at least the unconstrained one), also with nearly parallel columns."""
+def _fit_reference(cols, tau, ridge):
+    """The ridge NNLS residual built the plain way: the columns side by side, sqrt(ridge) I below
+    them, the torques padded with zeros, scipy.optimize.nnls (inf past the 100 N force cap)."""
+    A = np.concatenate(cols, axis=1)
+    k = A.shape[1]
+    if ridge > 0:
+        A = np.vstack([A, np.sqrt(ridge) * np.eye(k)])
+        tau = np.concatenate([tau, np.zeros(k)])
+    x, rnorm = nnls(A, tau, maxiter=50 * k)
+    return float("inf") if x.max() > 100.0 else float(rnorm * rnorm)
+
+
+def test_fitter_same_numbers_as_plain_nnls_and_bounds_below():
+    """_Fitter.rss and _fit_module give the plainly built ridge NNLS residual exactly;
+    lower_bounds never exceeds it (NNLS's residual is at least the unconstrained one), also with
+    nearly parallel columns."""
     from explore3d.feeling.localise import _Fitter, _fit_module
     rng = np.random.default_rng(5)
     for trial in range(200):
@@ -76,7 +89,7 @@ def test_fitter_same_numbers_as_fit_module_and_bounds_below():
         lb = fit.lower_bounds(extras)
         for e, bound in zip(extras, lb):
             r = fit.rss(e)
-            assert r == _fit_module(base + [e], tau, ridge=ridge)[1]
+            assert r == _fit_reference(base + [e], tau, ridge) == _fit_module(base + [e], tau, ridge=ridge)[1]
             assert bound <= r
         assert np.all(lb == -np.inf) if ridge == 0.0 else np.all(np.isfinite(lb))
     assert _Fitter([], 2, np.ones(24), ridge=1e-4).lower_bounds(np.zeros((0, 24, 2))).shape == (0,)

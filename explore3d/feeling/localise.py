@@ -269,20 +269,26 @@ class _Fitter:
         self.A = np.zeros((rows, k))
         if base:
             np.concatenate(base, axis=1, out=self.A[:n, :kb])
-        if ridge > 0:
+        if ridge > 0:  # a small penalty on the forces: among explanations the data cannot tell apart
+            # (e.g. a straight proximal chain does not see the force along itself) the gentlest wins
             self.A[n:] = _ridge_rows(ridge, k)
             self.t = np.concatenate([np.asarray(tau, dtype=np.float64), np.zeros(k)])
         else:
             self.t = np.asarray(tau, dtype=np.float64)
         self.n, self.kb, self.maxiter, self.fmax = n, kb, 50 * k, fmax
 
-    def rss(self, extra: np.ndarray) -> float:
-        """The residual sum of squares with ``extra`` (n, width) as the last columns (inf past fmax)."""
+    def fit(self, extra: np.ndarray) -> tuple[np.ndarray, float]:
+        """(weights (k,), residual sum of squares) with ``extra`` (n, width) as the last columns
+        (the sum inf when a weight passes fmax)."""
         self.A[: self.n, self.kb:] = extra
         x, rnorm = _nnls(self.A, self.t, self.maxiter)
         if max(x.tolist()) > self.fmax:
-            return float("inf")
-        return float(rnorm * rnorm)
+            return x, float("inf")
+        return x, float(rnorm * rnorm)
+
+    def rss(self, extra: np.ndarray) -> float:
+        """The residual sum of squares of :meth:`fit`."""
+        return self.fit(extra)[1]
 
     def lower_bounds(self, extras: np.ndarray) -> np.ndarray:
         """(m,) a lower bound on :meth:`rss` of each of ``extras`` (m, n, width), less a safety margin.
@@ -329,22 +335,11 @@ class _Fitter:
 
 
 def _fit_module(cols: list, tau: np.ndarray, fmax: float = MAX_FORCE_N, ridge: float = 0.0):
+    """NNLS of the joint torques ``tau`` (n,) on the generator columns ``cols`` (each (n, w)), with an
+    optional ridge on the weights: (weights, residual sum of squares; inf past ``fmax``)."""
     if not cols:
         return np.zeros(0), float(tau @ tau)
-    k = sum(c.shape[1] for c in cols)
-    if ridge > 0:  # a small penalty on the forces: among explanations the data cannot tell apart
-        # (e.g. a straight proximal chain does not see the force along itself) the gentlest wins
-        n = len(tau)
-        A = np.empty((n + k, k))
-        np.concatenate(cols, axis=1, out=A[:n])
-        A[n:] = _ridge_rows(ridge, k)
-        tau = np.concatenate([tau, np.zeros(k)])
-    else:
-        A = np.concatenate(cols, axis=1)
-    x, rnorm = _nnls(A, np.asarray(tau, dtype=np.float64), 50 * k)
-    if x.size and x.max() > fmax:
-        return x, float("inf")
-    return x, float(rnorm * rnorm)
+    return _Fitter(cols[:-1], cols[-1].shape[1], tau, fmax, ridge).fit(cols[-1])
 
 
 def localise(spec: ArmSpec, q, tau_ext, T_world_base=None, sigma_nm: float = 1.0e-3, chi2_gain: float = CHI2_GAIN,
